@@ -1,0 +1,47 @@
+"""The `handskin` console command: one typer app whose subcommands live beside their packages."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from handskin import __version__
+
+app = typer.Typer(
+    name="handskin",
+    help="Simulation-backed labelled tactile data for robot skin: maps, images, datasets, models.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"handskin {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option("--version", callback=_version, is_eager=True, help="Print the version."),
+    ] = False,
+) -> None:
+    """handskin: tactile maps, synthetic tactile datasets and touch-recognition models."""
+
+
+def _register() -> None:
+    from tactile.cli import register as register_tactile
+
+    register_tactile(app)
+
+
+_register()
+
+
+def main() -> None:
+    """Entry point of the console script."""
+    app()

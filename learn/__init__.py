@@ -1,0 +1,2 @@
+"""Torch models, training, evaluation and experiments. Reads dataset files and uses tactile/;
+never imports sim/."""

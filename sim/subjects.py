@@ -1,0 +1,118 @@
+"""Simulated subjects: a hand (size, handedness, tissue softness) and habits (force, noise).
+
+Population after Albini & Cannata, IJRR 2020: 90 volunteers, hand length 15-22 cm (mean 18 cm),
+77.8 % right-handed. Subjects carry ids, so a dataset can be split by subject and its test set
+hold hands never seen in training (`split_subjects`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.hand import HAND_LENGTH_RANGE_M, HandConfig
+from tactile.errors import ConfigError
+
+MEAN_HAND_LENGTH_M = 0.18  # Albini & Cannata 2020
+SD_HAND_LENGTH_M = 0.015  # 15-22 cm over 90 people is about +-2.3 sd
+RIGHT_HANDED_FRACTION = 0.778  # Albini & Cannata 2020
+BREADTH_RATIO_MEAN, BREADTH_RATIO_SD = 0.45, 0.015  # breadth / length (ANSUR-type means)
+TISSUE_DEPTH_MEAN_M, TISSUE_DEPTH_SD_M = 0.0035, 0.0004  # soft-tissue allowance (m)
+FORCE_LOG_SD = 0.3  # force scale is log-normal around 1 (people press 0.5-2x as hard)
+APPROACH_SD_DEG = 15.0  # preferred offset of the approach direction around the link axis
+POSE_NOISE_RANGE_DEG = (2.0, 8.0)  # per-subject std of joint-angle noise on grasp poses
+FORCE_SCALE_RANGE = (0.2, 5.0)
+APPROACH_RANGE_DEG = (-60.0, 60.0)
+POSE_NOISE_LIMIT_DEG = (0.0, 30.0)
+
+
+@dataclass(frozen=True)
+class Subject:
+    """One simulated person: their (dominant) hand and their habits."""
+
+    subject_id: str  # unique id, e.g. "s0007"
+    hand: HandConfig  # size, side = handedness, tissue softness
+    force_scale: float = 1.0  # multiplier on an interaction's nominal force (dimensionless)
+    approach_deg: float = 0.0  # preferred approach azimuth around the link axis, degrees
+    pose_noise_deg: float = 4.0  # std of per-joint noise added to grasp poses, degrees
+
+    def __post_init__(self) -> None:
+        if not self.subject_id:
+            raise ConfigError("Subject.subject_id is empty; give a unique id such as 's0001'")
+        _check("force_scale", self.force_scale, FORCE_SCALE_RANGE)
+        _check("approach_deg", self.approach_deg, APPROACH_RANGE_DEG)
+        _check("pose_noise_deg", self.pose_noise_deg, POSE_NOISE_LIMIT_DEG)
+
+    @property
+    def handedness(self) -> str:
+        """"right" or "left": the side of the dominant hand used in the interactions."""
+        return self.hand.side
+
+    @property
+    def tissue_depth_m(self) -> float:
+        """Soft-tissue allowance of this subject's hand, metres (larger = softer)."""
+        return self.hand.tissue_depth_m
+
+
+def _check(field: str, value: float, bounds: tuple[float, float]) -> None:
+    lo, hi = bounds
+    if not np.isfinite(value) or not lo <= value <= hi:
+        raise ConfigError(f"Subject.{field}={value!r} out of range; allowed [{lo:g}, {hi:g}]")
+
+
+def truncated_normal(
+    rng: np.random.Generator, n: int, mean: float, sd: float, bounds: tuple[float, float]
+) -> np.ndarray:
+    """(n,) draws of N(mean, sd) restricted to ``bounds`` (rejection sampling, deterministic)."""
+    out = np.empty(0)
+    while out.size < n:
+        draw = rng.normal(mean, sd, size=2 * (n - out.size) + 8)
+        out = np.concatenate([out, draw[(draw >= bounds[0]) & (draw <= bounds[1])]])
+    return out[:n]
+
+
+def sample_subjects(n: int, rng: np.random.Generator, *, first_id: int = 0) -> list[Subject]:
+    """``n`` subjects drawn from the paper's population; ids ``s{first_id:04d}`` onwards.
+
+    Hand length: normal (mean 18 cm, sd 1.5 cm) truncated to 15-22 cm; breadth = length x
+    N(0.45, 0.015) (so breadth correlates with length); right-handed with probability 0.778.
+    The same Generator state gives the same subjects.
+    """
+    if n < 0:
+        raise ConfigError(f"sample_subjects: n={n} out of range; allowed n >= 0")
+    length = truncated_normal(rng, n, MEAN_HAND_LENGTH_M, SD_HAND_LENGTH_M, HAND_LENGTH_RANGE_M)
+    ratio = np.clip(rng.normal(BREADTH_RATIO_MEAN, BREADTH_RATIO_SD, n), 0.40, 0.50)
+    right = rng.random(n) < RIGHT_HANDED_FRACTION
+    tissue = np.clip(rng.normal(TISSUE_DEPTH_MEAN_M, TISSUE_DEPTH_SD_M, n), 0.0025, 0.0045)
+    force = np.clip(np.exp(rng.normal(0.0, FORCE_LOG_SD, n)), 0.4, 2.5)
+    approach = np.clip(rng.normal(0.0, APPROACH_SD_DEG, n), -45.0, 45.0)
+    noise = rng.uniform(*POSE_NOISE_RANGE_DEG, n)
+    return [
+        Subject(
+            subject_id=f"s{first_id + i:04d}",
+            hand=HandConfig(
+                length_m=float(length[i]), breadth_m=float(length[i] * ratio[i]),
+                side="right" if right[i] else "left", tissue_depth_m=float(tissue[i]),
+            ),
+            force_scale=float(force[i]), approach_deg=float(approach[i]),
+            pose_noise_deg=float(noise[i]),
+        )
+        for i in range(n)
+    ]
+
+
+def split_subjects(
+    subjects: list[Subject], test_fraction: float, rng: np.random.Generator
+) -> tuple[list[Subject], list[Subject]]:
+    """Split subjects (not samples) into (train, test); no subject id is in both."""
+    if not 0.0 <= test_fraction <= 1.0:
+        raise ConfigError(f"split_subjects: test_fraction={test_fraction} outside [0, 1]")
+    ids = [s.subject_id for s in subjects]
+    if len(set(ids)) != len(ids):
+        raise ConfigError("split_subjects: duplicate subject ids; sample with distinct first_id")
+    order = rng.permutation(len(subjects))
+    n_test = round(test_fraction * len(subjects))
+    test = {int(i) for i in order[:n_test]}
+    train_list = [s for i, s in enumerate(subjects) if i not in test]
+    return train_list, [s for i, s in enumerate(subjects) if i in test]

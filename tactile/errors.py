@@ -1,0 +1,27 @@
+"""The project's one small exception hierarchy (used by tactile/, sim/ and learn/).
+
+Errors are raised at boundaries (files, configs, user arrays) before any work starts, and each
+message names the problem and the fix.
+"""
+
+from __future__ import annotations
+
+
+class HandskinError(Exception):
+    """Base class of every error handskin raises on purpose."""
+
+
+class LayoutError(HandskinError, ValueError):
+    """A taxel layout (file or arrays) is malformed: the message names file, row and fix."""
+
+
+class MapError(HandskinError, ValueError):
+    """A tactile map cannot be built, loaded or applied (e.g. wrong pressure shape, NaN)."""
+
+
+class ConfigError(HandskinError, ValueError):
+    """A configuration value is unknown or out of range: the message names field and range."""
+
+
+class DataError(HandskinError, ValueError):
+    """A dataset or recording on disk is malformed, incompatible or from another configuration."""

@@ -1,0 +1,77 @@
+"""Resizing tactile images and label images to a network's input size (the paper uses 68 × 100).
+
+Images are resized with anti-aliasing (Gaussian pre-filter, bilinear), keeping their dtype
+semantics: uint8 stays uint8 in 0..255 (rounded), floats keep their dtype and range. Label
+images use nearest neighbour so that no class is invented at boundaries.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from skimage.transform import resize
+
+from tactile.errors import ConfigError
+
+NET_SIZE = (68, 100)  # (H, W) pixels, the paper's network input
+
+
+def _check(img: np.ndarray, size: tuple[int, int]) -> tuple[int, int]:
+    if img.ndim not in (2, 3):
+        raise ConfigError(f"expected an (H, W) or (B, H, W) image, got shape {img.shape}")
+    h, w = (int(s) for s in size)
+    if h < 1 or w < 1:
+        raise ConfigError(f"size must be (H, W) with positive pixels, got {size!r}")
+    return h, w
+
+
+def _resize_one(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    out = resize(img.astype(np.float64), size, order=1, anti_aliasing=True, preserve_range=True)
+    if img.dtype == np.uint8:
+        return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+    if np.issubdtype(img.dtype, np.integer):
+        info = np.iinfo(img.dtype)
+        return np.clip(np.rint(out), info.min, info.max).astype(img.dtype)
+    return out.astype(img.dtype)
+
+
+def resize_image(img: np.ndarray, size: tuple[int, int] = NET_SIZE) -> np.ndarray:
+    """Anti-aliased resize of a tactile image or a batch of them.
+
+    Parameters
+    ----------
+    img : (H, W) or (B, H, W), uint8 (0..255) or float. size : (h, w) pixels.
+
+    Returns
+    -------
+    resized : (h, w) or (B, h, w), same dtype (integers rounded and clipped to their range).
+    """
+    img = np.asarray(img)
+    h, w = _check(img, size)
+    if img.ndim == 2:
+        return _resize_one(img, (h, w))
+    return np.stack([_resize_one(frame, (h, w)) for frame in img]).reshape(len(img), h, w)
+
+
+def resize_labels(lbl: np.ndarray, size: tuple[int, int] = NET_SIZE) -> np.ndarray:
+    """Nearest-neighbour resize of a label image or a batch of them (no new classes).
+
+    Output pixel (i, j) takes input pixel (floor((i + 0.5) H / h), floor((j + 0.5) W / w)).
+
+    Parameters
+    ----------
+    lbl : (H, W) or (B, H, W) int. size : (h, w) pixels.
+
+    Returns
+    -------
+    resized : (h, w) or (B, h, w), same dtype.
+    """
+    lbl = np.asarray(lbl)
+    h, w = _check(lbl, size)
+    rows = _nearest(lbl.shape[-2], h)
+    cols = _nearest(lbl.shape[-1], w)
+    return lbl[..., rows[:, None], cols[None, :]]
+
+
+def _nearest(n_in: int, n_out: int) -> np.ndarray:
+    """Source index of each of ``n_out`` output samples over ``n_in`` inputs (centre rule)."""
+    return np.minimum(((np.arange(n_out) + 0.5) * n_in / n_out).astype(np.int64), n_in - 1)

@@ -1,0 +1,116 @@
+"""Hand-part labels: label images consistent with the tactile image, back-projection, summaries."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import Delaunay
+
+from tactile.errors import MapError
+from tactile.labels import (
+    CLASS_NAMES,
+    PALETTE,
+    PartSummary,
+    backproject,
+    colorize,
+    part_summary,
+)
+from tactile.resize import resize_labels
+from tactile.synthetic import cylinder_sector_layout
+from tactile.tactile_map import TactileMap
+
+
+@pytest.fixture(scope="module")
+def forearm() -> TactileMap:
+    layout, flat_mm = cylinder_sector_layout()
+    uv = np.column_stack([flat_mm[:, 1], -flat_mm[:, 0]])
+    return TactileMap.from_flat(layout.positions_m, uv, np.arange(len(uv)), Delaunay(uv).simplices)
+
+
+def two_contacts(tmap: TactileMap) -> tuple[np.ndarray, np.ndarray]:
+    """Thumb (1) presses a disk around (-100, 40) mm, palm (6) a disk around (80, -50) mm."""
+    p, labels = np.zeros(tmap.n_taxels), np.zeros(tmap.n_taxels, dtype=np.int64)
+    for cls, centre in ((1, (-100.0, 40.0)), (6, (80.0, -50.0))):
+        d = np.linalg.norm(tmap.uv - centre, axis=1)
+        pressed = d < 25.0
+        p[pressed] = 3e4 * (1.2 - d[pressed] / 25.0)  # Pa
+        labels[pressed] = cls
+    return p, labels
+
+
+def test_palette_and_names() -> None:
+    assert CLASS_NAMES[0] == "background" and len(CLASS_NAMES) == 7
+    assert PALETTE.shape == (7, 3) and PALETTE.dtype == np.uint8
+    assert not PALETTE[0].any()
+    assert len({tuple(c) for c in PALETTE}) == 7
+    assert colorize(np.array([[0, 6]])).shape == (1, 2, 3)
+
+
+def test_separated_regions_get_their_class(forearm: TactileMap) -> None:
+    p, labels = two_contacts(forearm)
+    seg = forearm.label_image(p, labels)
+    image = forearm.image(p)
+    assert seg.shape == forearm.shape and seg.dtype == np.uint8
+    np.testing.assert_array_equal(seg == 0, image == 0)  # labelled exactly where the image is lit
+    centres = forearm.pixel_centers()
+    near_thumb = np.linalg.norm(centres - (-100.0, 40.0), axis=-1) < 40.0
+    near_palm = np.linalg.norm(centres - (80.0, -50.0), axis=-1) < 40.0
+    assert set(np.unique(seg[near_thumb])) == {0, 1}
+    assert set(np.unique(seg[near_palm])) == {0, 6}
+    assert not seg[~(near_thumb | near_palm)].any()
+
+
+def test_backproject_recovers_pressed_taxels(forearm: TactileMap) -> None:
+    p, labels = two_contacts(forearm)
+    recovered = backproject(forearm, forearm.label_image(p, labels))
+    pressed = p > 0
+    np.testing.assert_array_equal(recovered[pressed], labels[pressed])
+    far = np.linalg.norm(forearm.uv - (0.0, 0.0), axis=1) < 30.0
+    assert not recovered[far].any()
+    batch = backproject(forearm, np.stack([forearm.label_image(p, labels)] * 2))
+    assert batch.shape == (2, forearm.n_taxels)
+    np.testing.assert_array_equal(batch[1], recovered)
+
+
+def test_backproject_majority_in_radius(forearm: TactileMap) -> None:
+    seg = np.zeros(forearm.shape, dtype=np.uint8)
+    seg[:, : forearm.shape[1] // 2] = 3
+    labels = backproject(forearm, seg, radius_mm=3.0)
+    u_split = forearm.origin_mm[0] + forearm.shape[1] // 2 * forearm.step_mm
+    clear = np.abs(forearm.uv[:, 0] - u_split) > 4.0
+    np.testing.assert_array_equal(labels[clear], np.where(forearm.uv[clear, 0] < u_split, 3, 0))
+
+
+def test_part_summary_by_hand() -> None:
+    labels = np.array([0, 1, 1, 1, 6, 2, 0])
+    p = np.array([9.0, 2.0, 4.0, 0.0, 5.0, 0.0, 1.0])
+    summary = part_summary(labels, p)
+    assert list(summary) == list(CLASS_NAMES[1:])
+    assert summary["thumb"] == PartSummary(2, 3.0)  # taxels 1, 2 pressed; 3 reads zero
+    assert summary["palm"] == PartSummary(1, 5.0)
+    assert summary["index"] == PartSummary(0, 0.0)  # labelled but not pressed
+    assert summary["middle"] == PartSummary(0, 0.0)
+    assert part_summary(labels, p, threshold=3.0)["thumb"] == PartSummary(1, 4.0)
+
+
+def test_bad_labels_raise(forearm: TactileMap) -> None:
+    p = np.zeros(forearm.n_taxels)
+    with pytest.raises(MapError, match=r"0\.\.6"):
+        forearm.label_image(p, np.full(forearm.n_taxels, 7))
+    with pytest.raises(MapError, match="integer"):
+        forearm.label_image(p, np.zeros(forearm.n_taxels))
+    with pytest.raises(MapError, match="seg must be"):
+        backproject(forearm, np.zeros((4, 4), dtype=np.uint8))
+
+
+def test_resize_labels_nearest_keeps_classes() -> None:
+    lbl = np.zeros((247, 362), dtype=np.uint8)
+    lbl[50:150, 100:200] = 4
+    lbl[200:, 300:] = 6
+    small = resize_labels(lbl, (68, 100))
+    assert small.shape == (68, 100) and small.dtype == np.uint8
+    assert set(np.unique(small)) == {0, 4, 6}
+    assert small[int(100 * 68 / 247), int(150 * 100 / 362)] == 4
+    batch = resize_labels(np.stack([lbl, lbl]), (68, 100))
+    np.testing.assert_array_equal(batch[1], small)
+    np.testing.assert_array_equal(resize_labels(lbl, lbl.shape), lbl)
