@@ -47,7 +47,9 @@ def _flat(layout_or_p, normals=None, **kw):
 @pytest.mark.parametrize("method", ["arap", "lscm"])
 def test_developable_patch_is_isometric(radius_m: float, method: str) -> None:
     """Edge lengths within 1 % (plus the chord-vs-arc gap of the 3D mesh on a tight radius)."""
-    layout, exact = cylinder_sector_layout(radius_m=radius_m, width_mm=150.0, length_mm=200.0)
+    layout, exact = cylinder_sector_layout(
+        radius_m=radius_m, width_mm=150.0, length_mm=200.0, pitch_mm=11.0
+    )
     flat = _flat(layout, method=method)
     e = _edges(flat.faces)
     xyz = layout.positions_m[flat.vertex_taxel] * 1e3
@@ -72,7 +74,7 @@ def _edges(faces: np.ndarray) -> np.ndarray:
 
 
 def test_canonical_orientation_and_determinism() -> None:
-    layout, _ = cylinder_sector_layout(radius_m=0.05, width_mm=80.0, length_mm=250.0)
+    layout, _ = cylinder_sector_layout(radius_m=0.05, width_mm=80.0, length_mm=250.0, pitch_mm=11.0)
     a, b = _flat(layout), _flat(layout)
     for name in ("vertex_uv_mm", "vertex_taxel", "faces", "taxel_uv_mm"):
         assert np.array_equal(getattr(a, name), getattr(b, name))
@@ -89,7 +91,7 @@ def test_canonical_orientation_and_determinism() -> None:
 def test_full_tube_is_cut_into_a_strip(n_rows: int) -> None:
     radius_m = n_rows * ROW_MM / (2 * np.pi) * 1e-3  # the lattice closes round the tube
     layout, _ = cylinder_sector_layout(
-        radius_m=radius_m, width_mm=(n_rows - 1) * ROW_MM + 1e-6, length_mm=150.0
+        radius_m=radius_m, width_mm=(n_rows - 1) * ROW_MM + 1e-6, length_mm=150.0, pitch_mm=11.0
     )
     flat = _flat(layout)
     assert flat.seams >= 1 and flat.n_patches == 1
@@ -106,7 +108,9 @@ def test_full_tube_is_cut_into_a_strip(n_rows: int) -> None:
 
 
 def test_patch_with_hole_is_not_cut_and_keeps_the_hole() -> None:
-    layout, exact = cylinder_sector_layout(radius_m=0.04, width_mm=150.0, length_mm=200.0)
+    layout, exact = cylinder_sector_layout(
+        radius_m=0.04, width_mm=150.0, length_mm=200.0, pitch_mm=11.0
+    )
     keep = np.linalg.norm(exact - [0.0, 10.0], axis=1) > 25.0
     p, exact = layout.positions_m[keep], exact[keep]
     flat = _flat(p, layout.normals[keep])
@@ -129,7 +133,7 @@ def _inside(point: np.ndarray, tri: np.ndarray) -> bool:
 
 
 def test_separate_patches_are_packed_without_overlap_and_far_taxel_is_nan() -> None:
-    layout, _ = cylinder_sector_layout(radius_m=0.05, width_mm=80.0, length_mm=100.0)
+    layout, _ = cylinder_sector_layout(radius_m=0.05, width_mm=80.0, length_mm=100.0, pitch_mm=11.0)
     p = layout.positions_m
     far = p[:1] + np.array([[0.0, -0.1, 0.0]])
     positions = np.concatenate([p, p + np.array([0.0, 0.15, 0.0]), far])
@@ -145,7 +149,7 @@ def test_separate_patches_are_packed_without_overlap_and_far_taxel_is_nan() -> N
 
 
 def test_degenerate_input_raises() -> None:
-    layout, _ = cylinder_sector_layout(radius_m=0.05, width_mm=40.0, length_mm=40.0)
+    layout, _ = cylinder_sector_layout(radius_m=0.05, width_mm=40.0, length_mm=40.0, pitch_mm=11.0)
     p = layout.positions_m
     empty = SurfaceMesh(np.zeros((0, 3), np.int64), np.ones(len(p)), 0, np.arange(len(p)))
     with pytest.raises(MapError, match="no triangles"):

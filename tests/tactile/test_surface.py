@@ -36,7 +36,9 @@ def _equilateral_delaunay(flat_mm: np.ndarray) -> set[tuple[int, ...]]:
 @pytest.mark.parametrize("radius_m", [0.075, 0.03])
 @pytest.mark.parametrize("given_normals", [True, False])
 def test_cylinder_sector_matches_flat_delaunay(radius_m: float, given_normals: bool) -> None:
-    layout, flat = cylinder_sector_layout(radius_m=radius_m, width_mm=150.0, length_mm=200.0)
+    layout, flat = cylinder_sector_layout(
+        radius_m=radius_m, width_mm=150.0, length_mm=200.0, pitch_mm=11.0
+    )
     mesh = triangulate(layout.positions_m, layout.normals if given_normals else None)
     got = {tuple(sorted(t)) for t in mesh.faces.tolist()}
     assert _equilateral_delaunay(flat) <= got  # every lattice triangle is found
@@ -52,7 +54,9 @@ def test_cylinder_sector_matches_flat_delaunay(radius_m: float, given_normals: b
 
 
 def test_hole_stays_a_hole() -> None:
-    layout, flat = cylinder_sector_layout(radius_m=0.05, width_mm=150.0, length_mm=200.0)
+    layout, flat = cylinder_sector_layout(
+        radius_m=0.05, width_mm=150.0, length_mm=200.0, pitch_mm=11.0
+    )
     keep = np.linalg.norm(flat, axis=1) > 25.0
     mesh = triangulate(layout.positions_m[keep], layout.normals[keep])
     centre = flat[keep][mesh.faces].mean(axis=1)
@@ -61,7 +65,7 @@ def test_hole_stays_a_hole() -> None:
 
 
 def test_separate_patches_are_not_bridged_and_far_taxel_is_isolated() -> None:
-    layout, _ = cylinder_sector_layout(radius_m=0.05, width_mm=80.0, length_mm=100.0)
+    layout, _ = cylinder_sector_layout(radius_m=0.05, width_mm=80.0, length_mm=100.0, pitch_mm=11.0)
     p = layout.positions_m
     shifted = p + np.array([0.0, 0.15, 0.0])  # a second patch 50 mm beyond the first
     far = p[:1] + np.array([[0.0, -0.1, 0.0]])

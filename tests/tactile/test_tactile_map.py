@@ -18,7 +18,7 @@ from tactile.tactile_map import TactileMap
 
 def flat_forearm(**kw: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions (N, 3) m, exact flat uv (N, 2) mm (long axis along u), Delaunay faces (M, 3)."""
-    layout, flat_mm = cylinder_sector_layout(**kw)
+    layout, flat_mm = cylinder_sector_layout(**{"pitch_mm": 11.0, **kw})
     uv = np.column_stack([flat_mm[:, 1], -flat_mm[:, 0]])  # a rotation: (s, z) -> (z, -s)
     return layout.positions_m, uv, Delaunay(uv).simplices
 
