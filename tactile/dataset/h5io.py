@@ -1,0 +1,162 @@
+"""Reproducible HDF5 building blocks: files, groups and datasets without timestamps, JSON attrs,
+atomic writes, and the tactile map + layout stored as plain arrays.
+
+HDF5 stamps every object header with its creation time unless told otherwise; root group, groups
+and datasets are all created here with time tracking off, so the same content written twice gives
+the same bytes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from tactile.distortion import DistortionReport
+from tactile.layout import TaxelLayout
+from tactile.tactile_map import TactileMap
+
+GZIP_LEVEL = 4  # zlib level: ~the size of level 9 at a fraction of the time on sparse images
+SCALAR_CHUNK = 1024  # samples per HDF5 chunk of a scalar field (one sample would waste space)
+MAP_ARRAYS = ("positions_m", "uv", "vertex_uv_mm", "vertex_taxel", "faces")
+DISTORTION = ("area_ratio", "angle_error_deg", "edge_ratio")
+LAYOUT_ARRAYS = ("positions_m", "normals", "module_ids", "channel_ids", "merged_channels")
+
+
+def canonical_json(obj: object) -> str:
+    """JSON with sorted keys and fixed separators: equal objects give equal strings."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+
+
+@contextlib.contextmanager
+def atomic_path(path: Path) -> Iterator[Path]:
+    """Yield a temporary path in ``path``'s folder; on success it replaces ``path`` atomically.
+
+    On any exception the temporary file is removed and ``path`` is left as it was.
+    """
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def write_json(path: Path, obj: object) -> None:
+    """Write indented, key-sorted JSON atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(obj, sort_keys=True, indent=2) + "\n", encoding="utf-8")
+
+
+def create_file(path: Path) -> h5py.File:
+    """A new (truncated) HDF5 file whose root group carries no timestamps."""
+    fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
+    fcpl.set_obj_track_times(False)
+    return h5py.File(h5py.h5f.create(os.fsencode(path), h5py.h5f.ACC_TRUNC, fcpl=fcpl))
+
+
+def group(parent: h5py.Group, name: str) -> h5py.Group:
+    """The subgroup ``name`` of ``parent``, created without timestamps when absent."""
+    if name in parent:
+        return parent[name]
+    gcpl = h5py.h5p.create(h5py.h5p.GROUP_CREATE)
+    gcpl.set_obj_track_times(False)
+    h5py.h5g.create(parent.id, name.encode(), gcpl=gcpl)
+    return parent[name]
+
+
+def h5_dtype(dtype: str) -> np.dtype:
+    """The HDF5 dtype of a schema dtype (``"str"`` = variable-length UTF-8)."""
+    return h5py.string_dtype("utf-8") if dtype == "str" else np.dtype(dtype)
+
+
+def stacked_dataset(
+    parent: h5py.Group, name: str, n: int, shape: tuple[int, ...], dtype: str
+) -> h5py.Dataset:
+    """An (n, *shape) dataset chunked one sample per chunk (scalars: SCALAR_CHUNK per chunk),
+    gzip + shuffle for numbers, no timestamps."""
+    chunks = (1, *shape) if shape else (max(1, min(n, SCALAR_CHUNK)),)
+    kw: dict[str, object] = {"compression": "gzip", "compression_opts": GZIP_LEVEL}
+    kw = {} if dtype == "str" else {**kw, "shuffle": True}
+    return parent.create_dataset(
+        name, shape=(n, *shape), dtype=h5_dtype(dtype), chunks=chunks, track_times=False, **kw
+    )
+
+
+def plain_dataset(parent: h5py.Group, name: str, data: np.ndarray) -> h5py.Dataset:
+    """A small contiguous dataset (map arrays, split indices), no timestamps."""
+    return parent.create_dataset(name, data=np.asarray(data), track_times=False)
+
+
+def set_attrs(obj: h5py.HLObject, attrs: dict[str, object]) -> None:
+    """Set attributes in sorted key order: str, numbers and numeric arrays as they are; dicts,
+    lists, booleans and None as canonical JSON text."""
+    for key in sorted(attrs):
+        value = attrs[key]
+        native = isinstance(value, str | np.ndarray | np.number) or (
+            isinstance(value, int | float) and not isinstance(value, bool)
+        )
+        obj.attrs[key] = value if native else canonical_json(value)
+
+
+def write_map(parent: h5py.Group, tmap: TactileMap, layout: TaxelLayout) -> None:
+    """Store the map (the arrays of ``TactileMap.save``) in ``/map`` and the layout in
+    ``/map/layout``."""
+    g = group(parent, "map")
+    for key in MAP_ARRAYS:
+        plain_dataset(g, key, getattr(tmap, key))
+    for key in DISTORTION:
+        plain_dataset(g, f"distortion_{key}", getattr(tmap.distortion, key))
+    flipped = tmap.distortion.n_flipped
+    set_attrs(g, {"step_mm": float(tmap.step_mm), "distortion_n_flipped": flipped})
+    lg = group(g, "layout")
+    for key in LAYOUT_ARRAYS:
+        if getattr(layout, key) is not None:
+            plain_dataset(lg, key, getattr(layout, key))
+    n_ch = -1 if layout.n_channels is None else int(layout.n_channels)
+    set_attrs(lg, {"name": layout.name, "n_channels": n_ch})
+
+
+def read_map(g: h5py.Group) -> TactileMap:
+    """The TactileMap stored by :func:`write_map` (look-up table rebuilt)."""
+    report = DistortionReport(
+        *(g[f"distortion_{k}"][()] for k in DISTORTION), int(g.attrs["distortion_n_flipped"])
+    )
+    return TactileMap.from_flat(
+        g["positions_m"][()], g["vertex_uv_mm"][()], g["vertex_taxel"][()], g["faces"][()],
+        step_mm=float(g.attrs["step_mm"]), distortion=report, taxel_uv_mm=g["uv"][()],
+    )  # fmt: skip
+
+
+def read_layout(g: h5py.Group) -> TaxelLayout:
+    """The TaxelLayout stored by :func:`write_map` (``g`` is ``/map/layout``)."""
+    arrays = {k: g[k][()] for k in LAYOUT_ARRAYS if k in g}
+    n_ch = int(g.attrs["n_channels"])
+    return TaxelLayout(**arrays, n_channels=None if n_ch < 0 else n_ch, name=str(g.attrs["name"]))
+
+
+def copy_tree(src: h5py.Group, dst: h5py.Group) -> None:
+    """Copy groups, small datasets and attrs from ``src`` into ``dst`` (no timestamps)."""
+    set_attrs(dst, dict(src.attrs))
+    for key in src:
+        item = src[key]
+        if isinstance(item, h5py.Group):
+            copy_tree(item, group(dst, key))
+        else:
+            plain_dataset(dst, key, item[()])
+
+
+def write_h5(path: Path, fill: Callable[[h5py.File], None]) -> None:
+    """Create ``path`` atomically: ``fill`` writes into a reproducible temporary file."""
+    with atomic_path(path) as tmp:
+        with create_file(tmp) as f:
+            fill(f)

@@ -1,0 +1,111 @@
+"""The dataset folder's ``manifest.json``: what the data was made from, and its fingerprint.
+
+The fingerprint is the sha256 of the canonical JSON (sorted keys, no spaces) of
+``{"config", "part", "generator_version", "seed"}``. It is written before the first chunk; a run
+pointed at a folder whose manifest differs is refused, so chunks of two configurations never mix.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from collections.abc import Mapping
+from os import PathLike
+from pathlib import Path
+
+import numpy as np
+
+from tactile.dataset.h5io import canonical_json, write_json
+from tactile.errors import DataError
+
+FORMAT = "handskin.dataset/1"
+MANIFEST = "manifest.json"
+IDENTITY = ("config", "part", "generator_version", "seed")
+
+
+def jsonable(obj: object) -> object:
+    """A JSON-ready copy: dataclasses -> dicts, tuples -> lists, numpy scalars/arrays -> Python,
+    paths -> str. Raises DataError naming the first value JSON cannot hold."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return jsonable(dataclasses.asdict(obj))
+    if isinstance(obj, Mapping):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray | np.generic):
+        return jsonable(obj.tolist())
+    if isinstance(obj, PathLike):
+        return str(obj)
+    if obj is None or isinstance(obj, bool | int | float | str):
+        if isinstance(obj, float) and not np.isfinite(obj):
+            raise DataError(f"config value {obj} is not finite; JSON cannot hold it. Fix: use null")
+        return obj
+    raise DataError(f"config value {obj!r} ({type(obj).__name__}) is not JSON-serialisable")
+
+
+def make_manifest(config: object, part: str, generator_version: str, seed: int) -> dict:
+    """The manifest dict: format, identity fields (JSON-ready) and their fingerprint."""
+    ident = {
+        "config": jsonable(config),
+        "part": str(part),
+        "generator_version": str(generator_version),
+        "seed": int(seed),
+    }
+    digest = hashlib.sha256(canonical_json(ident).encode("utf-8")).hexdigest()
+    return {"format": FORMAT, "fingerprint": digest, **ident}
+
+
+def differing_keys(a: object, b: object, prefix: str = "") -> list[str]:
+    """Dotted keys where two JSON-ready values differ (recursing into dicts)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        out: list[str] = []
+        for key in sorted(set(a) | set(b)):
+            sub = f"{prefix}.{key}" if prefix else str(key)
+            if key not in a or key not in b:
+                out.append(sub)
+            else:
+                out += differing_keys(a[key], b[key], sub)
+        return out
+    return [] if a == b else [prefix or "<value>"]
+
+
+def read_manifest(folder: Path) -> dict:
+    """The folder's manifest; DataError when missing or unreadable."""
+    path = folder / MANIFEST
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as err:
+        raise DataError(f"{path}: cannot read the dataset manifest ({err})") from err
+    if not isinstance(data, dict) or data.get("format") != FORMAT or "fingerprint" not in data:
+        raise DataError(f"{path} is not a {FORMAT} manifest. Fix: choose a new --out folder")
+    return data
+
+
+def claim_folder(folder: Path, manifest: dict) -> bool:
+    """Make ``folder`` the home of ``manifest``'s dataset; True when resuming an existing one.
+
+    An absent or empty folder gets the manifest (written atomically). A folder with the same
+    fingerprint is resumed. Anything else — another fingerprint, or files but no manifest — is a
+    DataError naming the differing keys and the fix; nothing in the folder is touched.
+    """
+    if folder.exists() and not folder.is_dir():
+        raise DataError(f"{folder} is a file, not a dataset folder. Fix: choose a new --out folder")
+    if not folder.exists() or not any(folder.iterdir()):
+        folder.mkdir(parents=True, exist_ok=True)
+        write_json(folder / MANIFEST, manifest)
+        return False
+    if not (folder / MANIFEST).exists():
+        raise DataError(
+            f"{folder} is not empty and has no {MANIFEST}: not a dataset folder. "
+            "Fix: choose a new --out folder (or an empty one)"
+        )
+    old = read_manifest(folder)
+    if old["fingerprint"] == manifest["fingerprint"]:
+        return True
+    keys = differing_keys({k: old.get(k) for k in IDENTITY}, {k: manifest[k] for k in IDENTITY})
+    raise DataError(
+        f"{folder} holds a dataset of another configuration: fingerprint {old['fingerprint'][:12]} "
+        f"on disk, {manifest['fingerprint'][:12]} requested; differing keys: "
+        f"{', '.join(keys) or 'format'}. Fix: write to a new --out folder (or delete this one)"
+    )

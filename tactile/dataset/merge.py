@@ -1,0 +1,204 @@
+"""Merge a dataset folder's chunks into ``dataset.h5`` (+ ``info.json``), streaming, reproducibly.
+
+The merge reads one chunk at a time (memory flat in the number of chunks), writes the fields
+stacked on axis 0, the train/test split (:mod:`tactile.dataset.splits`, seeded by the manifest's
+seed), the map and layout once, and the root attributes. Nothing in it depends on time or paths,
+so merging the same chunks twice gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import platform
+import shutil
+from importlib import metadata
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from tactile.dataset import h5io
+from tactile.dataset.manifest import read_manifest
+from tactile.dataset.schema import BY_NAME, STR, Dims, info_fields
+from tactile.dataset.splits import TRAIN_FRACTION, split_indices
+from tactile.dataset.writer import CHUNKS, STATIC, chunk_path, json_attr, list_chunks
+from tactile.errors import DataError
+from tactile.labels import CLASS_NAMES, N_CLASSES
+
+DATASET = "dataset.h5"
+INFO = "info.json"
+PACKAGES = ("numpy", "h5py", "scipy", "scikit-image", "mujoco", "handskin")
+ATTR_DOCS = {
+    "skin_counts_per_pa": "float, counts/Pa: nominal skin gain (pressure_from_raw)",
+    "skin_baseline_counts": "float or (N,) float, counts: untouched reading (pressure_from_raw)",
+    "actions": "list of str: names of the `action` indices",
+}
+
+
+def versions() -> dict[str, str | None]:
+    """Versions of Python and the packages that shape the data (None when not installed).
+
+    Read from package metadata: nothing is imported (in particular not mujoco).
+    """
+    out: dict[str, str | None] = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = None
+    return out
+
+
+def _chunks_to_merge(folder: Path, n_chunks: int | None) -> list[int]:
+    done = list_chunks(folder)
+    if not done:
+        raise DataError(f"{folder}: no complete chunks to merge. Fix: run the generator first")
+    expected = done[-1] + 1 if n_chunks is None else int(n_chunks)
+    missing = sorted(set(range(expected)) - set(done))
+    extra = sorted(set(done) - set(range(expected)))
+    if missing or extra:
+        raise DataError(
+            f"{folder}: chunk(s) {missing[:5]} missing (of {expected}); unexpected {extra[:5]}. "
+            "Fix: resume the generator with the same configuration to write them"
+        )
+    return done
+
+
+def _scan(folder: Path, ks: list[int]) -> tuple[list[int], dict[str, tuple[int, ...]]]:
+    """Samples per chunk and the per-sample shape of every field (equal in all chunks)."""
+    counts, shapes = [], None
+    for k in ks:
+        with h5py.File(chunk_path(folder, k), "r") as f:
+            got = {n: f[BY_NAME[n].path].shape[1:] for n in json_attr(f, "fields")}
+            counts.append(int(f.attrs["n_samples"]))
+        if shapes is not None and got != shapes:
+            raise DataError(
+                f"{chunk_path(folder, k)}: fields/shapes {got} differ from chunk 0's {shapes}. "
+                "Fix: delete the odd chunk and resume"
+            )
+        shapes = got
+    return counts, shapes or {}
+
+
+class _Stats:
+    """Per-sample ids, class counts and rejects collected while streaming."""
+
+    def __init__(self) -> None:
+        self.ids: dict[str, list[np.ndarray]] = {"is_hand": [], "subject_id": [], "instance_id": []}
+        self.pixels = np.zeros(N_CLASSES, np.int64)
+        self.rejects: dict[str, int] = {}
+
+    def add(self, f: h5py.File, fields: dict) -> None:
+        for name in self.ids:
+            if name in fields:
+                self.ids[name].append(f[BY_NAME[name].path][()])
+        if "label_image" in fields:
+            labels = f[BY_NAME["label_image"].path][()]
+            self.pixels += np.bincount(labels.ravel(), minlength=N_CLASSES)[:N_CLASSES]
+        for reason, n in json_attr(f, "rejects").items():
+            self.rejects[reason] = self.rejects.get(reason, 0) + int(n)
+
+    def column(self, name: str) -> np.ndarray | None:
+        return np.concatenate(self.ids[name]) if self.ids[name] else None
+
+    def class_balance(self) -> dict[str, object]:
+        out: dict[str, object] = {}
+        hand = self.column("is_hand")
+        if hand is not None:
+            out["samples"] = {"hand": int(hand.sum()), "non_hand": int((hand == 0).sum())}
+        if self.pixels.any():
+            out["label_image_pixels"] = dict(zip(CLASS_NAMES, self.pixels.tolist(), strict=True))
+        return out
+
+
+def _stream(f: h5py.File, folder: Path, ks: list[int], counts: list[int], shapes: dict) -> _Stats:
+    total, stats = sum(counts), _Stats()
+    out = {}
+    for name, shape in shapes.items():
+        parent, leaf = BY_NAME[name].path.split("/")
+        dtype = BY_NAME[name].dtype
+        out[name] = h5io.stacked_dataset(h5io.group(f, parent), leaf, total, shape, dtype)
+    start = 0
+    for k, n in zip(ks, counts, strict=True):
+        with h5py.File(chunk_path(folder, k), "r") as src:
+            for name in shapes:
+                ds = src[BY_NAME[name].path]
+                is_str = BY_NAME[name].dtype == STR
+                out[name][start : start + n] = ds.asstr()[()] if is_str else ds[()]
+            stats.add(src, shapes)
+        start += n
+    return stats
+
+
+def merge_chunks(
+    folder: str | Path,
+    *,
+    n_chunks: int | None = None,
+    train_fraction: float = TRAIN_FRACTION,
+    remove_chunks: bool = False,
+) -> Path:
+    """Merge ``folder/chunks/chunk_*.h5`` into ``folder/dataset.h5`` and write ``info.json``.
+
+    The chunks must be 0..K-1 without gaps (K = ``n_chunks`` when given, so an unfinished run is
+    refused) and agree in fields and shapes. ``dataset.h5`` is
+    replaced atomically; ``remove_chunks`` deletes ``chunks/`` afterwards. Returns the file path.
+    """
+    folder = Path(folder)
+    manifest = read_manifest(folder)
+    if not (folder / CHUNKS / STATIC).exists():
+        raise DataError(f"{folder}: {CHUNKS}/{STATIC} is missing. Fix: rerun the generator")
+    ks = _chunks_to_merge(folder, n_chunks)
+    counts, shapes = _scan(folder, ks)
+    info: dict[str, object] = {}
+
+    def fill(f: h5py.File) -> None:
+        stats = _stream(f, folder, ks, counts, shapes)
+        split = split_indices(
+            stats.column("is_hand"), stats.column("subject_id"), stats.column("instance_id"),
+            train_fraction=train_fraction, seed=int(manifest["seed"]),
+        )  # fmt: skip
+        g = h5io.group(f, "splits")
+        h5io.plain_dataset(g, "train", split.train.astype(np.int64))
+        h5io.plain_dataset(g, "test", split.test.astype(np.int64))
+        with h5py.File(folder / CHUNKS / STATIC, "r") as static:
+            h5io.copy_tree(static["map"], h5io.group(f, "map"))
+            extra = dict(static.attrs)
+        attrs = _root_attrs(manifest, stats, split.report, sum(counts), train_fraction)
+        h5io.set_attrs(f, {**extra, **attrs})
+        info.update(_info(manifest, attrs, shapes, extra, f["map"].attrs["dims"]))
+
+    path = folder / DATASET
+    h5io.write_h5(path, fill)
+    h5io.write_json(folder / INFO, info)
+    if remove_chunks:
+        shutil.rmtree(folder / CHUNKS)
+    return path
+
+
+def _root_attrs(manifest: dict, stats: _Stats, report: dict, n: int, fraction: float) -> dict:
+    return {
+        "format": manifest["format"],
+        "fingerprint": manifest["fingerprint"],
+        "config": h5io.canonical_json(manifest["config"]),
+        "versions": versions(),
+        "generator_version": manifest["generator_version"],
+        "seed": int(manifest["seed"]),
+        "part": manifest["part"],
+        "class_balance": stats.class_balance(),
+        "rejects": dict(sorted(stats.rejects.items())),
+        "split_report": report,
+        "train_fraction": float(fraction),
+        "n_samples": int(n),
+    }  # fmt: skip
+
+
+def _info(manifest: dict, attrs: dict, shapes: dict, extra: dict, dims: np.ndarray) -> dict:
+    seq = shapes["seq_raw"][0] if "seq_raw" in shapes else None
+    d = Dims(int(dims[0]), int(dims[1]), int(dims[2]), seq)
+    keys = ("format", "fingerprint", "part", "seed", "generator_version", "n_samples",
+            "class_balance", "rejects", "split_report", "versions")  # fmt: skip
+    return {
+        **{k: attrs[k] for k in keys},
+        "dims": {"N": d.n_taxels, "H": d.height, "W": d.width, "T": d.seq_len},
+        "fields": info_fields(tuple(shapes), d),
+        "attrs": {k: ATTR_DOCS.get(k, "caller-defined") for k in sorted(extra)},
+    }

@@ -1,0 +1,183 @@
+"""Read a dataset lazily with h5py (no torch, no mujoco).
+
+    ds = open_dataset("out/")            # the folder or its dataset.h5
+    len(ds), ds[0]["image"], ds.raw[10:20], ds["is_hand"][:], ds.splits["train"], ds.map
+
+The HDF5 file is opened on first access and reopened in a new process, so a reader can be
+pickled into DataLoader workers (each worker opens its own handle).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from functools import cached_property
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from tactile.dataset import h5io
+from tactile.dataset.merge import DATASET, INFO
+from tactile.dataset.schema import BY_NAME, FIELDS, STR
+from tactile.errors import DataError
+from tactile.layout import TaxelLayout
+from tactile.tactile_map import TactileMap
+
+JSON_ATTRS = frozenset({"config", "versions", "class_balance", "rejects", "split_report"})
+
+
+def decode_attr(key: str, value: object) -> object:
+    """An attribute as Python: JSON text (dicts, lists, known JSON attrs) decoded, numpy scalars
+    to Python numbers, arrays kept."""
+    if isinstance(value, bytes):
+        value = value.decode("utf-8")
+    if isinstance(value, str) and (key in JSON_ATTRS or value[:1] in "[{"):
+        return json.loads(value)
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+class DatasetReader:
+    """Lazy, picklable view of one ``dataset.h5``.
+
+    ``len(ds)``: samples S. ``ds[i]``: dict {field: value} of sample i (arrays; str for STR
+    fields). ``ds["raw"]`` or ``ds.raw``: the field's h5py.Dataset, (S, ...) (sliced lazily).
+    ``fields``: names present. ``map``, ``layout``, ``splits``, ``info``, ``attrs``: see below.
+    """
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        path = Path(path)
+        self.path = path / DATASET if path.is_dir() else path
+        if not self.path.is_file():
+            raise DataError(
+                f"no dataset at {self.path}. Fix: give a dataset folder holding {DATASET} "
+                "(merge the chunks first if only chunks/ exists)"
+            )
+        self._file: h5py.File | None = None
+        self._pid = -1
+        try:
+            f = h5py.File(self.path, "r")
+        except OSError as err:
+            msg = f"cannot open {self.path} as HDF5 ({err}). Fix: re-run the merge"
+            raise DataError(msg) from err
+        with f:
+            if "samples" not in f or "raw" not in f["samples"] or "map" not in f:
+                raise DataError(f"{self.path} is not a handskin dataset (no /samples/raw or /map)")
+            self.fields = tuple(s.name for s in FIELDS if s.path in f)
+            self._len = int(f["samples/raw"].shape[0])
+
+    @property
+    def file(self) -> h5py.File:
+        """The open h5py.File (opened on first use, reopened in a forked/spawned worker)."""
+        if self._file is None or self._pid != os.getpid():
+            self._file = h5py.File(self.path, "r")
+            self._pid = os.getpid()
+        return self._file
+
+    def close(self) -> None:
+        """Close the file handle (it reopens on the next access)."""
+        if self._file is not None and self._pid == os.getpid():
+            self._file.close()
+        self._file = None
+
+    def __enter__(self) -> DatasetReader:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state["_file"], state["_pid"] = None, -1
+        for key in ("map", "layout"):  # rebuilt lazily in the new process
+            state.pop(key, None)
+        return state
+
+    def __len__(self) -> int:
+        return self._len
+
+    def __repr__(self) -> str:
+        return f"DatasetReader({str(self.path)!r}, {self._len} samples, fields={self.fields})"
+
+    def __getitem__(self, key: int | str) -> dict[str, object] | h5py.Dataset:
+        if isinstance(key, str):
+            if key not in self.fields:
+                raise KeyError(f"no field {key!r} in {self.path}; fields: {', '.join(self.fields)}")
+            return self.file[BY_NAME[key].path]
+        i = int(key)
+        if not -self._len <= i < self._len:
+            raise IndexError(f"sample {i} out of range for {self._len} samples")
+        return {name: self.sample_field(name, i % self._len) for name in self.fields}
+
+    def __getattr__(self, name: str) -> h5py.Dataset:
+        if name.startswith("_") or name not in self.__dict__.get("fields", ()):
+            raise AttributeError(name)
+        return self.file[BY_NAME[name].path]
+
+    def sample_field(self, name: str, i: int) -> object:
+        """One field of sample i: an array, a numpy scalar, or str for STR fields."""
+        ds = self.file[BY_NAME[name].path]
+        return ds.asstr()[i] if BY_NAME[name].dtype == STR else ds[i]
+
+    @cached_property
+    def map(self) -> TactileMap:
+        """The dataset's TactileMap, rebuilt from ``/map`` (same look-up table as at writing)."""
+        return h5io.read_map(self.file["map"])
+
+    @cached_property
+    def layout(self) -> TaxelLayout:
+        """The part's TaxelLayout from ``/map/layout``."""
+        return h5io.read_layout(self.file["map/layout"])
+
+    @property
+    def splits(self) -> dict[str, np.ndarray]:
+        """{"train": (K,) int64, "test": (K',) int64} sample indices."""
+        return {k: v[()] for k, v in self.file["splits"].items()}
+
+    @property
+    def attrs(self) -> dict[str, object]:
+        """Root attributes, JSON ones decoded (config, versions, class_balance, rejects, ...)."""
+        return {k: decode_attr(k, v) for k, v in self.file.attrs.items()}
+
+    @property
+    def info(self) -> dict:
+        """The sidecar ``info.json`` (fields with dtype, shape, unit; counts; splits)."""
+        path = self.path.with_name(INFO)
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as err:
+            raise DataError(f"cannot read {path}: {err}. Fix: re-run the merge") from err
+
+    def pressure_from_raw(self, raw: np.ndarray) -> np.ndarray:
+        """Pressure from raw readings: max(raw - skin_baseline_counts, 0) / skin_counts_per_pa.
+
+        raw : (N,) or (B, N) counts. Returns the same shape, float64, Pa. Uses the root attrs
+        ``skin_counts_per_pa`` (float, counts/Pa; 1.0 when absent, giving counts) and
+        ``skin_baseline_counts`` (float or (N,) float, counts; 0 when absent). Per-taxel gain
+        spread and drift are not undone (they are not stored).
+        """
+        attrs = self.file.attrs
+        gain = float(attrs.get("skin_counts_per_pa", 1.0))
+        base = np.asarray(attrs.get("skin_baseline_counts", 0.0), dtype=np.float64)
+        return np.maximum(np.asarray(raw, dtype=np.float64) - base, 0.0) / gain
+
+    def images_from_raw(
+        self, raw: np.ndarray, tmap: TactileMap | None = None, keep: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Tactile images recomputed from raw readings through a (possibly corrupted) map.
+
+        raw : (N,) or (B, N) counts. tmap : the map to use (default: the dataset's). keep :
+        (K,) taxel indices when ``tmap`` was built from ``layout.subset(keep)``. Returns (H, W)
+        or (B, H, W) uint8 with (H, W) = tmap.shape.
+        """
+        p = self.pressure_from_raw(raw)
+        if keep is not None:
+            p = p[..., np.asarray(keep)]
+        return (self.map if tmap is None else tmap).image(p)
+
+
+def open_dataset(path: str | os.PathLike[str]) -> DatasetReader:
+    """Open a dataset folder (or its ``dataset.h5``) lazily; DataError when there is none."""
+    return DatasetReader(path)
