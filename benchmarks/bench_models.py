@@ -1,0 +1,73 @@
+"""CPU (and GPU when present) time per image of every network at batch size 1, after warm-up.
+
+    python benchmarks/bench_models.py [--runs 50] [--widths 1.0 0.5] [--size 68 100]
+
+Prints, for each registered model at its default width (and any extra ``--widths``), the
+parameter count and the median ms / image with 1 and 2 CPU threads, as built (eval mode) and
+after ``prepare_for_inference`` (batch norm folded, channels-last), against the targets of the
+learning issue (HandsNet ≤ 3 ms, SegNet ≤ 60 ms per image on one CPU core, judged on the
+prepared model). Figures are printed, never asserted: they depend on the machine and its load.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+
+import torch
+
+from learn.metrics import time_per_image
+from learn.models import MODELS, count_parameters, create_model, prepare_for_inference
+
+TARGET_MS_ONE_CORE = {"handsnet": 3.0, "segnet": 60.0}  # from the learning issue
+
+
+def default_width(arch: str) -> float | None:
+    """The constructor's default ``width`` (None for fixed-width networks)."""
+    param = inspect.signature(MODELS[arch]).parameters.get("width")
+    return None if param is None else param.default
+
+
+def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int) -> str:
+    """One printed row: arch, width, parameters, ms / image at 1 and 2 threads (and GPU)."""
+    kw = {"input_size": size} if arch == "handsnet" else {"width": width}
+    model = create_model(arch, **kw).eval()
+    fast = prepare_for_inference(model)
+    cells = []
+    for net in (model, fast):
+        for threads in (1, 2):
+            torch.set_num_threads(threads)
+            cells.append(1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs))
+    gpu = ""
+    if torch.cuda.is_available():
+        gpu = f"  gpu {1e3 * time_per_image(model, size, 'cuda', n_runs=runs):7.2f}"
+    target = TARGET_MS_ONE_CORE.get(arch)
+    verdict = ""
+    if target is not None:
+        verdict = f"  target ≤ {target:g}: {'ok' if cells[2] <= target else 'MISSED'}"
+    w = "fixed" if width is None else f"{width:g}"
+    times = "".join(f"{c:9.2f}" for c in cells)
+    return f"{arch:9s} {w:>6s} {count_parameters(model):>12,d}{times}{gpu}{verdict}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=50, help="timed runs after 10 warm-up runs")
+    parser.add_argument("--widths", type=float, nargs="*", default=[], help="extra widths")
+    parser.add_argument("--size", type=int, nargs=2, default=(68, 100), help="H W in pixels")
+    args = parser.parse_args()
+    size = tuple(args.size)
+    print(f"input 1 × 1 × {size[0]} × {size[1]}, batch 1, median of {args.runs} runs, torch "
+          f"{torch.__version__}")
+    print("ms / image: as built (1 thread, 2 threads), prepared (1 thread, 2 threads)")
+    print(f"{'model':9s} {'width':>6s} {'parameters':>12s}" + "".join(
+        f"{h:>9s}" for h in ("built 1", "built 2", "prep 1", "prep 2")))
+    for arch in MODELS:
+        widths = [default_width(arch)]
+        widths += [] if widths[0] is None else [w for w in args.widths if w != widths[0]]
+        for width in widths:
+            print(bench_one(arch, width, size, args.runs), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,148 @@
+"""Frozen configurations of learn/: model, training (Tables 17–18 of the paper), BoVW, VGG + SVM.
+
+Every field carries its unit and the reason for its default. Values marked *paper* are the
+paper's; values marked *ours* are choices argued here (the paper's Table 18 and the VGG16
+settings were not available to us, so no number below pretends to come from them).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+from tactile.errors import ConfigError
+
+
+def _require(ok: bool, message: str) -> None:
+    """Raise ``ConfigError(message)`` unless ``ok``."""
+    if not ok:
+        raise ConfigError(message)
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Which network to build (``learn.models.create_model``) and its size."""
+
+    arch: str = "handsnet"  # registry name: handsnet, vgg16, segnet, fcn16s
+    num_classes: int = 2  # 2 = hand / non-hand; 7 = background + 5 fingers + palm
+    in_channels: int = 1  # tactile images are grey; 3 only to take ImageNet-style weights as-is
+    width: float | None = None  # channel multiplier (1.0 = VGG16's 64..512); None = model default
+    input_size: tuple[int, int] = (68, 100)  # (H, W) px: the paper's resized tactile image
+
+    def __post_init__(self) -> None:
+        _require(self.num_classes >= 2, f"ModelConfig.num_classes >= 2, not {self.num_classes}")
+        _require(self.in_channels >= 1, "ModelConfig.in_channels must be >= 1")
+        _require(self.width is None or self.width > 0, "ModelConfig.width must be > 0")
+        _require(min(self.input_size) >= 1, "ModelConfig.input_size must be positive pixels")
+
+    def kwargs(self) -> dict[str, object]:
+        """Keyword arguments of ``create_model(self.arch, **kwargs)``."""
+        kw: dict[str, object] = {"num_classes": self.num_classes, "in_channels": self.in_channels}
+        if self.arch == "handsnet":
+            kw["input_size"] = self.input_size
+        elif self.width is not None:
+            kw["width"] = self.width
+        return kw
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation of one training run; the learning rate drops by a step schedule."""
+
+    optimizer: str = "sgdm"  # SGD with momentum: the paper's "drop factor / period" are sgdm's
+    lr: float = 0.01  # initial learning rate (paper, Table 17)
+    momentum: float = 0.9  # assumed: MATLAB sgdm's default (the paper names no value)
+    weight_decay: float = 1e-4  # L2 factor; assumed: MATLAB's default L2Regularization
+    lr_drop_factor: float = 0.2  # multiply the lr by this ... (paper, Table 17)
+    lr_drop_period_epochs: int = 40  # ... every this many epochs (paper, Table 17)
+    batch_size: int = 64  # images per step (paper, Table 17)
+    epochs: int = 80  # passes over the training set (paper, Table 17)
+    loss: str = "ce"  # ce | weighted_ce | dice | generalized_dice (learn.losses)
+    # per-layer lr factors, selector -> factor (learn.finetune.param_groups); 0 freezes
+    lr_factors: Mapping[str, float] = field(default_factory=dict, hash=False)
+    seed: int = 0  # torch / numpy seed of the run
+
+    def __post_init__(self) -> None:
+        _require(self.optimizer in ("sgdm", "adam"), "TrainConfig.optimizer: sgdm or adam")
+        _require(self.lr > 0 and self.weight_decay >= 0, "TrainConfig: lr > 0, weight_decay >= 0")
+        _require(0 < self.lr_drop_factor <= 1, "TrainConfig.lr_drop_factor must be in (0, 1]")
+        _require(self.lr_drop_period_epochs >= 1, "TrainConfig.lr_drop_period_epochs >= 1")
+        _require(self.batch_size >= 1 and self.epochs >= 1, "TrainConfig: batch_size, epochs >= 1")
+        _require(all(f >= 0 for f in self.lr_factors.values()), "TrainConfig.lr_factors >= 0")
+
+
+@dataclass(frozen=True)
+class ExperimentConfig:
+    """A model and how to train it."""
+
+    model: ModelConfig
+    train: TrainConfig
+
+
+#: HandsNet, Table 17 of the paper (lr 0.01, × 0.2 every 40 epochs, batch 64, 80 epochs).
+HANDSNET = ExperimentConfig(ModelConfig("handsnet", 2), TrainConfig())
+
+#: VGG16-style classifier fine-tuned end to end. *Ours*: HandsNet's schedule at a tenth of
+#: its lr (a pretrained network needs smaller steps); width 0.25 trains on a CPU (GPU: 1.0).
+VGG16_FINETUNE = ExperimentConfig(ModelConfig("vgg16", 2, width=0.25), TrainConfig(lr=0.001))
+
+#: SegNet (Table 18 values unavailable: *ours*). Median-frequency weighted CE (the paper's best
+#: loss for SegNet); lr 0.01 with momentum 0.9 is stable with batch norm in every conv; batch
+#: 16 and 60 epochs with × 0.2 at 30 keep a CPU run to hours at width 0.5 (~35 ms/forward).
+SEGNET = ExperimentConfig(
+    ModelConfig("segnet", 7, width=0.5),
+    TrainConfig(lr=0.01, lr_drop_period_epochs=30, batch_size=16, epochs=60, loss="weighted_ce"),
+)
+
+#: FCN-16s (Table 18 values unavailable: *ours*). Dice loss (the paper's best for FCN); same
+#: schedule as SegNet so the two compare; width 0.25 (full width has 134 M parameters).
+FCN16S = ExperimentConfig(
+    ModelConfig("fcn16s", 7, width=0.25),
+    TrainConfig(lr=0.01, lr_drop_period_epochs=30, batch_size=16, epochs=60, loss="dice"),
+)
+
+#: Fine-tuning of the paper's Test C: lr factor 0.1 on the first two convolutions, lr 0.01
+#: halved after 60 of 120 epochs, batch 128 (paper).
+FINETUNE_TEST_C = TrainConfig(
+    lr=0.01,
+    lr_drop_factor=0.5,
+    lr_drop_period_epochs=60,
+    batch_size=128,
+    epochs=120,
+    lr_factors={"first_two_convs": 0.1},
+)
+
+
+@dataclass(frozen=True)
+class BovwConfig:
+    """Bag of visual words: SIFT descriptors → k-means vocabulary → histogram → linear SVM."""
+
+    vocabulary_size: int = 80  # visual words (paper)
+    detector: str = "sift"  # sift (skimage keypoints, dense fallback per image) | dense
+    grid_step_px: int = 4  # dense grid spacing, px: ~6 descriptors across a 28-px real image
+    patch_px: int = 16  # dense descriptor support (4 × 4 cells of 4 px, as SIFT's)
+    svm_c: float = 1.0  # LinearSVC C (*ours*: sklearn's default; the paper gives none)
+    kmeans_batch_size: int = 1024  # MiniBatchKMeans batch (descriptors)
+    seed: int = 0  # k-means and SVM seed
+
+    def __post_init__(self) -> None:
+        _require(self.vocabulary_size >= 2, "BovwConfig.vocabulary_size must be >= 2")
+        _require(self.detector in ("sift", "dense"), "BovwConfig.detector: 'sift' or 'dense'")
+        _require(self.grid_step_px >= 1, "BovwConfig.grid_step_px must be >= 1")
+        _require(self.patch_px >= 4 and self.patch_px % 4 == 0, "BovwConfig.patch_px: 4k px")
+        _require(self.svm_c > 0, "BovwConfig.svm_c must be > 0")
+
+
+@dataclass(frozen=True)
+class VggSvmConfig:
+    """VGG16 features + linear SVM."""
+
+    svm_c: float = 0.25  # LinearSVC C (paper)
+    feature_layer: str = "fc7"  # fc7 (after ReLU) | pool5 (global-average-pooled conv features)
+    standardize: bool = True  # zero-mean unit-variance features before the SVM (*ours*)
+    batch_size: int = 64  # images per feature-extraction forward pass
+
+    def __post_init__(self) -> None:
+        _require(self.svm_c > 0, "VggSvmConfig.svm_c must be > 0")
+        _require(self.feature_layer in ("fc7", "pool5"), "VggSvmConfig.feature_layer: fc7|pool5")
+        _require(self.batch_size >= 1, "VggSvmConfig.batch_size must be >= 1")
