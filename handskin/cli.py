@@ -34,9 +34,13 @@ def _root(
 
 
 def _register() -> None:
+    from sim.cli import register as register_sim
     from tactile.cli import register as register_tactile
+    from tactile.dataset.cli import register as register_dataset
 
     register_tactile(app)
+    register_sim(app)
+    register_dataset(app)
 
 
 _register()

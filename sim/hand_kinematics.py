@@ -53,7 +53,11 @@ METACARPAL_RADIUS_RATIO = 0.13  # palm half-thickness ~1 cm at breadth 8 cm
 THENAR_RADIUS_RATIO = 0.15  # thenar eminence around the first metacarpal
 MCP_PITCH_RATIO = 0.25  # finger spacing at the MCPs / breadth
 CMC_SPREAD = 0.55  # CMC lateral offsets / MCP lateral offsets (metacarpals fan out distally)
-THUMB_CMC_XYZ = (0.06, 0.28, -0.08)  # thumb CMC (trapezium): x / length, y and z / breadth
+# Thumb CMC (trapezium): x / length, y and z / breadth. z = 0 puts the thenar capsule's lowest
+# point 0.02 x breadth (1.6 mm) below the palmar plane and the thumb pads at rest in it: the real
+# eminence is soft and flattens on a surface; lower (z = -0.08, measured) the thenar and the thumb
+# protrude 6-8 mm and prop a palm pressed on a flat face up, so the palm pad never touches.
+THUMB_CMC_XYZ = (0.06, 0.28, 0.0)
 THUMB_HOME_ANGLE_DEG = 35.0  # first metacarpal in the palm plane, radially abducted from +x
 THUMB_PRONATION_DEG = 90.0  # thumb pad faces ulnar (nail radial), 90 deg from the finger pads
 
@@ -107,8 +111,15 @@ def finger_joint_centres_m(length_m: float, breadth_m: float) -> tuple[dict, dic
     run = {f: np.sqrt(lengths[f][0] ** 2 - ((1 - CMC_SPREAD) * mcp_y[f]) ** 2) for f in FINGERS}
     cmc_x = length_m - lengths["middle"][1:].sum() - run["middle"]
     cmc = {f: np.array([cmc_x, CMC_SPREAD * mcp_y[f], 0.0]) for f in FINGERS}
-    mcp = {f: np.array([cmc_x + run[f], mcp_y[f], 0.0]) for f in FINGERS}
+    mcp = {f: np.array([cmc_x + run[f], mcp_y[f], -_pad_drop_m(f, breadth_m)]) for f in FINGERS}
     return cmc, mcp
+
+
+def _pad_drop_m(finger: str, breadth_m: float) -> float:
+    """Palmar offset (m) of a finger's MCP so that its proximal pad lies in the palmar plane of the
+    metacarpals (a flat hand rests on palm *and* fingers; phalanges are thinner than the palm)."""
+    proximal = PHALANX_RADIUS_RATIO[0] * DIGIT_RADIUS_SCALE[finger]
+    return (METACARPAL_RADIUS_RATIO - proximal) * breadth_m
 
 
 def thumb_frame(home_angle_deg: float, pronation_deg: float) -> np.ndarray:
@@ -172,7 +183,7 @@ JOINT_TORQUE_NM: dict[str, float] = {
     "thumb_ip": 0.2,
     "palm_arch": 0.5,
 }
-SERVO_ERROR_AT_LIMIT_RAD = 0.25  # kp = torque limit / this: fingers press once 15 deg short
+SERVO_ERROR_AT_LIMIT_RAD = 0.6  # kp = torque limit / this: compliant, fingers conform to a surface
 
 
 def mirror_pos(pos: np.ndarray, side: str) -> np.ndarray:

@@ -6,7 +6,9 @@ holds it; candidates are then accepted best first (votes, then shortness) while 
 a consistently oriented 2-manifold: an edge holds at most two faces, a directed edge at most one,
 and the angular wedges of the faces around a taxel (in its tangent plane) never overlap.
 Triangles much longer than the local taxel spacing are rejected, so unsensorized regions stay
-holes while the small gaps between skin modules are bridged.
+holes while the small gaps between skin modules are bridged. Slivers (area below
+``MIN_AREA_FACTOR`` × spacing², from collinear pads such as the rows of iCub modules on a flat
+face) are never candidates, so the selection fills their place with proper triangles.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from tactile.seams import face_components
 N_NEIGHBOURS = 12  # umbrella size: about two rings of a hexagonal lattice
 N_SPACING = 3  # nearest neighbours whose median distance is the local spacing
 WEDGE_TOL_RAD = 1e-6  # wedges touching along a shared edge do not overlap
+MIN_AREA_FACTOR = 1e-4  # triangles of area < this × spacing² are slivers (collinear taxels)
 
 
 @dataclass(frozen=True)
@@ -52,7 +55,8 @@ def triangulate(
     ``left_arm``, hold normals up to 89° off the module planes); given normals only decide which
     side is outward.
     max_edge_factor : a triangle whose longest edge exceeds this × the median local spacing of its
-    taxels is rejected (leaves a hole rather than bridging an unsensorized region).
+    taxels is rejected (leaves a hole rather than bridging an unsensorized region). Triangles of
+    area below ``MIN_AREA_FACTOR`` × that spacing² (collinear taxels) are never emitted.
     """
     p = _check_positions(positions_m)
     k = min(N_NEIGHBOURS, len(p))
@@ -61,11 +65,14 @@ def triangulate(
     hint = None if normals is None else _check_normals(normals, len(p))
     n = estimate_normals(p, nbr, hint)
     cand, votes = _umbrella_candidates(p, n, nbr)
+    local = np.median(spacing[cand], axis=1)
     longest = _longest_edge(p, cand)
-    too_long = longest > max_edge_factor * np.median(spacing[cand], axis=1)
-    cand, votes, longest = cand[~too_long], votes[~too_long], longest[~too_long]
+    too_long = longest > max_edge_factor * local
+    sliver = _areas(p, cand) < MIN_AREA_FACTOR * local**2
+    ok = ~too_long & ~sliver
+    cand, votes, longest, local = cand[ok], votes[ok], longest[ok], local[ok]
     cand = _orient(p, n, cand)
-    order = np.lexsort((longest / np.median(spacing[cand], axis=1), -votes))
+    order = np.lexsort((longest / local, -votes))
     faces = _drop_redundant_patches(_select_manifold(p, n, cand[order]))
     used = np.zeros(len(p), bool)
     used[faces.ravel()] = True
@@ -163,6 +170,12 @@ def _longest_edge(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
     a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
     lengths = np.linalg.norm(np.stack([b - a, c - b, a - c]), axis=2)
     return lengths.max(axis=0)
+
+
+def _areas(p: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """Areas (T,) of triangles tri (T, 3), in the units of p squared."""
+    a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
+    return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
 
 
 def _orient(p: np.ndarray, n: np.ndarray, tri: np.ndarray) -> np.ndarray:

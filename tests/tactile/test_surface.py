@@ -13,6 +13,7 @@ from tactile.errors import MapError
 from tactile.layout import TaxelLayout
 from tactile.surface import triangulate
 from tactile.synthetic import cylinder_sector_layout
+from tactile.tactile_map import TactileMap
 
 PITCH_MM = 11.0
 
@@ -117,3 +118,39 @@ def test_icub_noisy_mesh_layout_builds_and_reports(icub_positions: Path) -> None
     assert mesh.n_rejected_long > 0  # noisy positions give long candidates: counted
     assert mesh.isolated.dtype == np.int64
     assert _edge_face_counts(mesh.faces).max() <= 2
+
+
+def _flat_module_plate(round_trip: bool) -> np.ndarray:
+    """iCub-style modules on a plane at z = 0, (384, 3) m: every module has rows of 3 and 4
+    exactly collinear pads. round_trip: positions moved 0.1 m away and back (a frame change), so
+    rows stay collinear to within rounding (what made the old code emit zero-area triangles)."""
+    from sim.tiling import Tiling
+
+    flat_mm, _, _ = Tiling(4, 8, col_pitch_mm=20.7, row_pitch_mm=35.9).flat()
+    xy = flat_mm * 1e-3
+    if round_trip:
+        xy = (xy + 0.1) - 0.1
+    return np.column_stack([xy, np.zeros(len(xy))])
+
+
+def _area_m2(p: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    return 0.5 * np.linalg.norm(_face_normals(p, faces), axis=1)
+
+
+@pytest.mark.parametrize("round_trip", [False, True])
+def test_collinear_pads_on_a_flat_plate_give_no_slivers(round_trip: bool) -> None:
+    p = _flat_module_plate(round_trip)
+    normals = np.tile([0.0, 0.0, 1.0], (len(p), 1))
+    mesh = triangulate(p, normals)
+    spacing = np.median(mesh.spacing_m[mesh.faces], axis=1)
+    assert (_area_m2(p, mesh.faces) >= 1e-4 * spacing**2).all()
+    assert len(mesh.isolated) == 0
+    # Same coverage as the triangulation of the same pads in general position (1 µm jitter).
+    jittered = p + np.random.default_rng(0).normal(0.0, 1e-6, p.shape) * [1, 1, 0]
+    reference = triangulate(jittered, normals)
+    assert _area_m2(p, mesh.faces).sum() == pytest.approx(
+        _area_m2(jittered, reference.faces).sum(), rel=1e-3
+    )
+    tmap = TactileMap.build(TaxelLayout(p, normals))
+    assert tmap.distortion.summary()["n_flipped"] == 0
+    assert np.isfinite(tmap.uv).all()

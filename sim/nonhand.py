@@ -1,0 +1,137 @@
+"""The non-hand mixture: which object or body part presses, which instance, and how.
+
+Mixture (documented weights, drawn by `sample_nonhand`):
+- 65 % objects, 35 % body parts: Albini & Cannata (IJRR 2020) recorded 1,820 non-hand contacts,
+  about 35 % of them other body parts (torso, arm, forearm, shoulder, back), the rest objects.
+- Objects: the hard negatives (rake, comb, rod bundle: 2-6 parallel finger-like geoms) take 30 %
+  (10 % each) because they are what a classifier that counts elongated blobs would call a hand;
+  the 13 other kinds share the remaining 70 % equally (about 5.4 % each).
+- Body parts: arms and shoulders lean on a robot arm most (the paper's list: arm, forearm,
+  shoulder, torso, back): forearm 20 %, upper arm 15 %, elbow 15 %, shoulder 15 %, chest 10 %,
+  back 10 %, knee 8 %, head 7 %.
+
+Instances: each kind has a pool of ``instances_per_kind`` instances (default 20), with global
+ids `instance_id_for` (unique across kinds), so a dataset split by instance id holds object and
+body-part instances in the test set that training never saw. The press mode is recorded in the
+description (``description["press"]``) so it reaches the dataset's contactor JSON.
+
+``python -m sim.nonhand`` presses every type through the episode runner and writes the contact
+sheets ``docs/sheet_objects.png`` and ``docs/sheet_body_parts.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from sim.bodyparts import BODY_KINDS, body_press, build_body_part
+from sim.contactors import ContactorSpec, PressPlan
+from sim.objects import HARD_NEGATIVES, OBJECT_KINDS, build_object, object_press
+from tactile.errors import ConfigError
+
+OBJECT_FRACTION = 0.65  # Albini & Cannata 2020: ~35 % of non-hand contacts were body parts
+HARD_NEGATIVE_SHARE = 0.30  # of objects, split equally among HARD_NEGATIVES
+BODY_WEIGHTS: dict[str, float] = {
+    "forearm": 0.20, "upper_arm": 0.15, "elbow": 0.15, "shoulder": 0.15, "chest": 0.10,
+    "back": 0.10, "knee": 0.08, "head": 0.07,
+}
+MAX_INSTANCES_PER_KIND = 1000  # global id stride per kind
+OBJECT_ID_BASE, BODY_ID_BASE = 100_000, 500_000  # global instance ids: base + 1000 k + i
+
+
+def object_weights() -> dict[str, float]:
+    """Probability of each object kind (sums to 1)."""
+    easy = [k for k in OBJECT_KINDS if k not in HARD_NEGATIVES]
+    w = {k: (1.0 - HARD_NEGATIVE_SHARE) / len(easy) for k in easy}
+    w |= {k: HARD_NEGATIVE_SHARE / len(HARD_NEGATIVES) for k in HARD_NEGATIVES}
+    return {k: w[k] for k in OBJECT_KINDS}
+
+
+def mixture() -> dict[tuple[str, str], float]:
+    """Probability of every (kind, type), e.g. ("object", "rake"); sums to 1."""
+    out = {("object", k): OBJECT_FRACTION * p for k, p in object_weights().items()}
+    total = sum(BODY_WEIGHTS.values())
+    out |= {("body", k): (1 - OBJECT_FRACTION) * p / total for k, p in BODY_WEIGHTS.items()}
+    return out
+
+
+def instance_id_for(kind: str, name: str, index: int) -> int:
+    """Global instance id of the ``index``-th instance of ``name`` (unique across all types)."""
+    if not 0 <= index < MAX_INSTANCES_PER_KIND:
+        raise ConfigError(f"instance index {index} out of range; allowed [0, 999]")
+    if kind == "object":
+        return OBJECT_ID_BASE + MAX_INSTANCES_PER_KIND * OBJECT_KINDS.index(name) + index
+    return BODY_ID_BASE + MAX_INSTANCES_PER_KIND * BODY_KINDS.index(name) + index
+
+
+def sample_nonhand(
+    rng: np.random.Generator, instances_per_kind: int = 20
+) -> tuple[ContactorSpec, PressPlan]:
+    """A non-hand contactor and its press, drawn from `mixture` and the instance pools.
+
+    The press mode ("pressed", "leaning", ...) is added to the spec's description as "press".
+    """
+    if not 1 <= instances_per_kind <= MAX_INSTANCES_PER_KIND:
+        raise ConfigError(f"instances_per_kind={instances_per_kind}; allowed [1, 1000]")
+    table = mixture()
+    keys = list(table)
+    p = np.array([table[k] for k in keys])
+    kind, name = keys[int(rng.choice(len(keys), p=p / p.sum()))]
+    iid = instance_id_for(kind, name, int(rng.integers(instances_per_kind)))
+    if kind == "object":
+        spec = build_object(name, rng, iid)
+        mode, plan = object_press(spec, rng)
+    else:
+        spec = build_body_part(name, rng, iid)
+        mode, plan = body_press(spec, rng)
+    return replace(spec, description=spec.description | {"press": mode}), plan
+
+
+def type_maker(kind: str, name: str, instances_per_kind: int = 20):
+    """``make(rng) -> (ContactorSpec, PressPlan)`` for `sim.episode.run_sample`: one type only."""
+
+    def make(rng: np.random.Generator) -> tuple[ContactorSpec, PressPlan]:
+        iid = instance_id_for(kind, name, int(rng.integers(instances_per_kind)))
+        build, press = (build_object, object_press) if kind == "object" else (
+            build_body_part, body_press)
+        spec = build(name, rng, iid)
+        mode, plan = press(spec, rng)
+        return replace(spec, description=spec.description | {"press": mode}), plan
+
+    return make
+
+
+def write_sheet(path: Path, kind: str, n_per_type: int = 3, seed: int = 0) -> Path:
+    """Contact sheet of ``n_per_type`` pressed samples of every object (or body-part) type."""
+    from sim.episode import EpisodeContext, run_sample
+    from tactile.sheet import save_contact_sheet
+
+    ctx, names = EpisodeContext(), OBJECT_KINDS if kind == "object" else BODY_KINDS
+    images, titles = [], []
+    for k, name in enumerate(names):
+        for i in range(n_per_type):
+            sample, _ = run_sample(k * n_per_type + i, seed, ctx, type_maker(kind, name))
+            desc = json.loads(sample["contactor"])
+            images.append(sample["image"])
+            titles.append(f"{name} {desc['press']} {float(sample['force_n']):.0f} N")
+    what = "objects" if kind == "object" else "body parts"
+    return save_contact_sheet(path, np.stack(images), titles=titles, n_cols=2 * n_per_type,
+                              title=f"simulated {what} pressed on the forearm", tile_in=1.9)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description="contact sheets of the non-hand contactors")
+    parser.add_argument("--out", type=Path, default=Path("docs"))
+    parser.add_argument("--per-type", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    for kind, file in (("object", "sheet_objects.png"), ("body", "sheet_body_parts.png")):
+        print(write_sheet(args.out / file, kind, args.per_type, args.seed))
+
+
+if __name__ == "__main__":
+    main()

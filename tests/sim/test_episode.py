@@ -1,0 +1,121 @@
+"""The episode runner against closed forms: a sphere pressed on the flat plate, sensors only at
+frame times, 10 Hz sequences, retries with derived seeds, determinism, the sample schema."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import mujoco
+import numpy as np
+import pytest
+
+from sim import press
+from sim.contactors import PressPlan, sphere_contactor
+from sim.episode import (
+    FRAME_DT_S,
+    EpisodeConfig,
+    EpisodeContext,
+    episode_rng,
+    run_episode,
+    run_sample,
+    site_pose,
+)
+from tactile.dataset.schema import Dims, validate_sample
+from tactile.errors import ConfigError
+
+RADIUS_M = 0.015
+PLAN = PressPlan(site_uv=(0.0, 0.0), force_n=5.0, durations_s=(0.2, 0.3, 0.3, 0.2))
+
+
+@pytest.fixture(scope="module")
+def ctx() -> EpisodeContext:
+    return EpisodeContext(EpisodeConfig(part="plate"))
+
+
+def sphere_maker(radius_m: float = RADIUS_M, plan: PressPlan = PLAN):
+    contactor = sphere_contactor(radius_m)
+    return lambda rng: (contactor, plan)
+
+
+def test_sphere_activates_the_closed_form_taxels(ctx):
+    contactor = sphere_contactor(RADIUS_M)
+    frames = run_episode(ctx, contactor, PLAN, np.random.default_rng(0))
+    scene = ctx.scene(contactor)
+    best = frames.frames[-1]  # end of hold: settled
+    centre = scene.data.geom_xpos[scene.model.geom("c_sphere").id]
+    dist = np.linalg.norm(ctx.part.layout.positions_m - centre, axis=1)
+    inside, outside = dist < RADIUS_M - 1e-4, dist > RADIUS_M + 1e-4
+    pressed = best.depth_m > 0
+    assert inside.sum() >= 5
+    assert pressed[inside].all() and not pressed[outside].any()
+    assert np.allclose(best.depth_m[inside], RADIUS_M - dist[inside], atol=1e-6)
+    assert best.force_n == pytest.approx(PLAN.force_n, rel=0.05)
+
+
+def test_press_frame_follows_the_skin_normal(ctx):
+    k, pos, quat = site_pose(ctx, PLAN, np.random.default_rng(0))
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, quat)
+    assert np.allclose(mat.reshape(3, 3)[:, 2], ctx.part.layout.normals[k])
+    assert np.allclose(pos, ctx.part.layout.positions_m[k])
+
+
+def test_sensors_off_between_frames_give_the_same_readings(ctx):
+    """The runner disables sensors while stepping; a run with sensors always on must read the
+    same depth at the frame times (sensors do not feed back into the dynamics)."""
+    contactor = sphere_contactor(RADIUS_M)
+    frames = run_episode(ctx, contactor, PLAN, np.random.default_rng(0))
+    scene = ctx.scene(contactor)
+    _, pos, quat = site_pose(ctx, PLAN, np.random.default_rng(0))
+    press.reset(scene, PLAN, pos, quat)
+    m, d = scene.model, scene.data
+    n_ctrl = round(0.01 / m.opt.timestep)
+    for j in range(round(frames.frames[-1].time_s / 0.01)):
+        press.apply_controls(scene, PLAN, j * 0.01)
+        mujoco.mj_step(m, d, nstep=n_ctrl)
+    mujoco.mj_forward(m, d)
+    assert np.array_equal(scene.readout.depth_m(d), frames.frames[-1].depth_m)
+
+
+def test_sample_matches_schema_and_sequence_is_10_hz(ctx):
+    sample, rejects = run_sample(3, 11, ctx, sphere_maker(), keep_sequence=True)
+    dims = Dims(ctx.part.n_taxels, *ctx.tmap.shape, seq_len=int(sample["seq_length"]))
+    validate_sample(sample, dims)
+    assert not rejects
+    assert int(sample["seq_length"]) == round(PLAN.total_s / FRAME_DT_S)
+    best = round(float(sample["time_s"]) / FRAME_DT_S) - 1
+    assert np.array_equal(sample["seq_raw"][best], sample["raw"])
+    assert sample["taxel_contactor"].max() == 0 and (sample["taxel_label"] == 0).all()
+    assert sample["image"].max() > 200
+
+
+def test_same_seed_and_index_give_identical_samples(ctx):
+    a, _ = run_sample(5, 3, ctx, sphere_maker())
+    b, _ = run_sample(5, 3, EpisodeContext(EpisodeConfig(part="plate")), sphere_maker())
+    c, _ = run_sample(6, 3, ctx, sphere_maker())
+    for key in ("raw", "pressure_pa", "image", "taxel_contactor"):
+        assert np.array_equal(a[key], b[key]), key
+    assert a["episode_seed"] == b["episode_seed"] != c["episode_seed"]
+    assert not np.array_equal(a["raw"], c["raw"])
+
+
+def test_failed_episode_is_counted_and_retried_with_a_new_seed(ctx):
+    shallow = dataclasses.replace(sphere_contactor(RADIUS_M), max_penetration_m=1e-5)
+    good = sphere_contactor(RADIUS_M)
+    attempts = []
+
+    def make(rng):
+        attempts.append(rng.random())
+        return (shallow if len(attempts) == 1 else good), PLAN
+
+    sample, rejects = run_sample(2, 9, ctx, make)
+    assert rejects == {"too_deep": 1}
+    assert attempts[0] != attempts[1]
+    assert int(sample["episode_seed"]) == episode_rng(9, 2, 1)[1] != episode_rng(9, 2, 0)[1]
+
+
+def test_impossible_limit_gives_up_after_max_attempts():
+    ctx = EpisodeContext(EpisodeConfig(part="plate", max_attempts=2))
+    shallow = dataclasses.replace(sphere_contactor(RADIUS_M), max_penetration_m=1e-5)
+    with pytest.raises(ConfigError, match="too_deep"):
+        run_sample(0, 0, ctx, lambda rng: (shallow, PLAN))
