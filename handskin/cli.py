@@ -35,12 +35,14 @@ def _root(
 
 def _register() -> None:
     from sim.cli import register as register_sim
+    from sim.view_cli import register as register_view
     from tactile.cli import register as register_tactile
     from tactile.dataset.cli import register as register_dataset
 
     register_tactile(app)
     register_sim(app)
     register_dataset(app)
+    register_view(app)
 
 
 _register()

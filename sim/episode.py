@@ -2,7 +2,9 @@
 
 `EpisodeContext` (one per worker) holds the part, its `TactileMap`, the skin instance and a cache
 of compiled press scenes (one per contactor key: compiling costs tens of ms, an episode a few
-hundred steps). `run_episode` simulates one `PressPlan` and returns its frames; `run_sample`
+hundred steps). `run_episode` simulates one `PressPlan` (the site from `sim.placement`: the plan's
+lattice point mapped onto the link surface, or an aim drawn by the policy shared by all
+contactors) and returns its frames; `run_sample`
 wraps it with the stability checks and retries of docs/DESIGN.md and returns the sample dict of
 the dataset schema (`tactile.dataset.schema`) plus reject counts by reason.
 
@@ -95,9 +97,6 @@ def contactor_key(c: ContactorSpec) -> str:
     return json.dumps([c.kind, c.name, c.subject_id, c.instance_id, c.description], sort_keys=True)
 
 
-link_axis = placement.link_axis  # kept importable from here
-
-
 def site_pose(ctx: EpisodeContext, plan: PressPlan, rng: np.random.Generator):
     """Skin frame at the plan's site (the link surface under it), or at a drawn aim taxel.
 
@@ -123,8 +122,9 @@ def _check(scene: press.PressScene, depth_m: np.ndarray, max_pen_m: float) -> No
     d = scene.data
     if not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
         raise EpisodeFailure("nan", "non-finite state")
-    warned = [mujoco.mjtWarning(i).name for i, w in enumerate(d.warning) if w.number]
-    if warned:
+    counts = d.warning.number  # (mjNWARNING,) one vector read, not a Python loop over structs
+    if counts.any():
+        warned = [mujoco.mjtWarning(i).name for i in np.flatnonzero(counts)]
         raise EpisodeFailure("warning", ", ".join(warned))
     if depth_m.max() > max_pen_m:
         raise EpisodeFailure("too_deep", f"{depth_m.max() * 1e3:.2f} mm > {max_pen_m * 1e3:.2f}")
@@ -143,11 +143,12 @@ def run_episode(
     n_frames = int(np.floor(end / FRAME_DT_S + 1e-9))
     n_ctrl = max(1, round(CONTROL_DT_S / m.opt.timestep))
     per_frame = round(FRAME_DT_S / CONTROL_DT_S)
+    sched = press.schedule(scene, plan, np.arange(n_frames * per_frame) * CONTROL_DT_S)
     frames = []
     for k in range(n_frames):
         m.opt.disableflags |= SENSOR_BIT
         for j in range(per_frame):
-            press.apply_controls(scene, plan, (k * per_frame + j) * CONTROL_DT_S)
+            press.apply_tick(scene, sched, k * per_frame + j)
             mujoco.mj_step(m, d, nstep=n_ctrl)
         m.opt.disableflags &= ~SENSOR_BIT
         mujoco.mj_forward(m, d)

@@ -2,7 +2,8 @@
 
 `sample_hand(index, seed, ctx, subjects)` is sample ``index`` of a hand dataset seeded ``seed``;
 it depends only on ``(seed, index)`` and the subject list. ``python -m sim.generate_hands`` writes
-the contact sheet ``docs/sheet_hands.png`` (one column per action).
+the contact sheets ``docs/sheet_hands.png`` (one column per action) and
+``docs/sheet_hands_<action>.png`` (12 samples of one action each).
 """
 
 from __future__ import annotations
@@ -44,34 +45,47 @@ def sample_hand(
     return run_sample(index, seed, ctx, hand_maker(subjects, ctx, action), keep_sequence)
 
 
-def write_hand_sheet(path: Path, n_per_action: int = 4, seed: int = 0) -> Path:
-    """Contact sheet of ``n_per_action`` hand samples per action (columns = actions)."""
+def _sheet_samples(ctx: EpisodeContext, subjects: list[Subject], actions: list[str], seed: int):
+    """(images, label images, titles) of one hand sample per entry of ``actions`` (index = slot)."""
+    images, labels, titles = [], [], []
+    for i, action in enumerate(actions):
+        sample, _ = sample_hand(i, seed, ctx, subjects, action=action)
+        images.append(sample["image"])
+        labels.append(sample["label_image"])
+        pos = ("front", "side", "free")[int(sample["operator_position"])]
+        active = int((sample["pressure_pa"] > ctx.cfg.active_pa).sum())
+        titles.append(f"{action} ({pos}) {float(sample['force_n']):.0f} N, {active} tx")
+    return np.stack(images), np.stack(labels), titles
+
+
+def write_hand_sheet(path: Path, n_per_action: int = 4, seed: int = 0,
+                     actions: tuple[str, ...] = ACTIONS) -> Path:
+    """Contact sheet of ``n_per_action`` hand samples of each of ``actions``: columns = actions
+    (several), or a grid of one action's samples (one action)."""
     from tactile.sheet import save_contact_sheet
 
     ctx = EpisodeContext()
     subjects = sample_subjects(12, np.random.default_rng(seed))
-    images, labels, titles = [], [], []
-    for row in range(n_per_action):
-        for k, action in enumerate(ACTIONS):
-            sample, _ = sample_hand(row * len(ACTIONS) + k, seed, ctx, subjects, action=action)
-            images.append(sample["image"])
-            labels.append(sample["label_image"])
-            pos = ("front", "side", "free")[int(sample["operator_position"])]
-            titles.append(f"{action} ({pos}) {float(sample['force_n']):.0f} N")
+    slots = [a for _ in range(n_per_action) for a in actions]
+    images, labels, titles = _sheet_samples(ctx, subjects, slots, seed)
+    what = actions[0] if len(actions) == 1 else "hand interactions"
     return save_contact_sheet(
-        path, np.stack(images), labels=np.stack(labels), titles=titles, n_cols=len(ACTIONS),
-        title="simulated hand interactions on the forearm (label colours over the image)",
-        tile_in=1.9,
+        path, images, labels=labels, titles=titles,
+        n_cols=len(actions) if len(actions) > 1 else 4, tile_in=1.9,
+        title=f"simulated {what} on the forearm (label colours over the image; tx = active taxels)",
     )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=Path, default=Path("docs/sheet_hands.png"))
+    parser.add_argument("--out", type=Path, default=Path("docs"))
     parser.add_argument("--per-action", type=int, default=4)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    print(write_hand_sheet(args.out, args.per_action, args.seed))
+    print(write_hand_sheet(args.out / "sheet_hands.png", args.per_action, args.seed))
+    for action in ACTIONS:
+        out = args.out / f"sheet_hands_{action}.png"
+        print(write_hand_sheet(out, 3 * args.per_action, args.seed + 1, actions=(action,)))
 
 
 if __name__ == "__main__":

@@ -29,7 +29,9 @@ force-depth law stiffens like fingertip pulp (Serina et al., J Biomech 1997) and
 below the tissue allowance. Measured on MuJoCo's tactile plate (tests/sim/test_hand.py, default
 3.5 mm allowance, index fingertip radius 0.102 x breadth): 2 / 5 / 10 N -> 2.2 / 2.5 / 2.7 mm
 depth -> patch 10.0-12.5 / 10.5-13.5 / 11-13.5 mm wide for 15-22 cm hands, matching the chord
-2 sqrt(2 r d) of a capsule end of radius r at depth d.
+2 sqrt(2 r d) of a capsule end of radius r at depth d. (A palm allowance twice the fingertip's
+was tried on the forearm: median active taxels per hand contact 17 -> 25, but the palm's share of
+hand pixels 0.47 -> 0.60 against the paper's 0.40; not kept.)
 
 Labels. Collision geoms are named ``<prefix><part>_<segment>`` with part in `HAND_PARTS`
 (the thenar eminence on the first metacarpal is "palm"); `geom_parts` / `geom_part_ids` recover

@@ -108,10 +108,14 @@ def finger_joint_centres_m(length_m: float, breadth_m: float) -> tuple[dict, dic
     lengths = segment_lengths_m(length_m)
     pitch = MCP_PITCH_RATIO * breadth_m
     mcp_y = dict(zip(FINGERS, pitch * np.array([1.5, 0.5, -0.5, -1.5]), strict=True))
-    run = {f: np.sqrt(lengths[f][0] ** 2 - ((1 - CMC_SPREAD) * mcp_y[f]) ** 2) for f in FINGERS}
+    drop = {f: _pad_drop_m(f, breadth_m) for f in FINGERS}
+    run = {
+        f: np.sqrt(lengths[f][0] ** 2 - ((1 - CMC_SPREAD) * mcp_y[f]) ** 2 - drop[f] ** 2)
+        for f in FINGERS
+    }
     cmc_x = length_m - lengths["middle"][1:].sum() - run["middle"]
     cmc = {f: np.array([cmc_x, CMC_SPREAD * mcp_y[f], 0.0]) for f in FINGERS}
-    mcp = {f: np.array([cmc_x + run[f], mcp_y[f], -_pad_drop_m(f, breadth_m)]) for f in FINGERS}
+    mcp = {f: np.array([cmc_x + run[f], mcp_y[f], -drop[f]]) for f in FINGERS}
     return cmc, mcp
 
 
@@ -159,7 +163,8 @@ def hand_geometry(length_m: float, breadth_m: float) -> HandGeometry:
 
 
 # Joint limits (degrees, right hand; sources in `sim.hand`) and torque limits (N m at strength 1:
-# a moderate grip of a few newtons per fingertip; maximal voluntary torques are 3-10 x higher).
+# a light-to-moderate grip of 1-3 N per fingertip, below a palm press of 5-25 N, so closing
+# fingers cannot lever the palm off a link — measured; maximal voluntary torques are 10 x higher).
 JOINT_LIMITS_DEG: dict[str, tuple[float, float]] = {
     "mcp_abd": (-20.0, 20.0),
     "mcp_flex": (-30.0, 90.0),
@@ -173,15 +178,15 @@ JOINT_LIMITS_DEG: dict[str, tuple[float, float]] = {
 }
 MIDDLE_ABD_LIMIT_DEG = 15.0
 JOINT_TORQUE_NM: dict[str, float] = {
-    "mcp_abd": 0.15,
-    "mcp_flex": 0.6,
-    "pip": 0.3,
-    "dip": 0.15,
-    "thumb_cmc_flex": 0.6,
-    "thumb_cmc_abd": 0.6,
-    "thumb_mcp": 0.4,
-    "thumb_ip": 0.2,
-    "palm_arch": 0.5,
+    "mcp_abd": 0.1,
+    "mcp_flex": 0.3,
+    "pip": 0.15,
+    "dip": 0.08,
+    "thumb_cmc_flex": 0.4,
+    "thumb_cmc_abd": 0.4,
+    "thumb_mcp": 0.25,
+    "thumb_ip": 0.12,
+    "palm_arch": 0.3,
 }
 SERVO_ERROR_AT_LIMIT_RAD = 0.6  # kp = torque limit / this: compliant, fingers conform to a surface
 
@@ -213,6 +218,6 @@ HAND_POSES_DEG: dict[str, dict[str, float]] = {
     "pinch": {  # thumb tip onto the index/middle tips (opposition, Kapandji)
         "index_mcp_flex": 50, "index_pip": 45, "index_dip": 20,
         "middle_mcp_flex": 50, "middle_pip": 45, "middle_dip": 20,
-        "thumb_cmc_flex": 35, "thumb_cmc_abd": 35, "thumb_mcp": 5, "thumb_ip": 5,
+        "thumb_cmc_flex": 30, "thumb_cmc_abd": 40, "thumb_mcp": 5, "thumb_ip": 5,
     },
 }

@@ -1,36 +1,51 @@
-"""Hand poses of the interactions (joint targets with the subject's noise) and site offsets.
+"""Hand poses of the interactions: joint targets with the subject's noise, wrist pitch, offsets.
 
-Targets are degrees of flexion (positive = flexion, palmar abduction, cupping; `sim.hand`). For
-grasps they lie beyond the link: the torque-limited finger servos stop where the fingers meet it.
-Free touches pick one of four variants (Albini & Cannata 2020, Fig. 6: whole hands, fingertips
-only, different pressures): flat hand, fingertips only (a random subset of digits flexed so the
-tips point at the skin and hold the palm off it), palm only (fingers lifted), loosely curled.
+Targets are degrees of flexion (positive = flexion, palmar abduction, cupping; `sim.hand`). The
+finger servos are weak (`sim.hand_kinematics.JOINT_TORQUE_NM`) and close only after the palm has
+landed (`sim.press.finger_fraction`), so targets beyond the link make fingers stop on it.
+
+Modes (Albini & Cannata 2020, Fig. 6: whole hands, fingertips only, different pressures):
+- ``wrap``: palm on a face with the MCP row on an edge, fingers around it (grasps; pushes whose
+  fingers cross an edge drape round it, `_DRAPE`); ``hook`` for pulls;
+- ``flat``: palm and straight fingers on a face long enough for them;
+- ``fingertips``: a random subset of fingers, the wrist pitched so that only they touch;
+- ``palm``: fingers lifted; ``curled``: loose fist, knuckles and palm.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from sim.hand_kinematics import FINGERS, JOINT_LIMITS_DEG, hand_geometry
 from sim import placement
+from sim.hand_kinematics import FINGERS, JOINT_LIMITS_DEG, hand_geometry
 from sim.parts import Part
 from sim.subjects import Subject
 
-# The forearm is ~15 cm across: a grasp puts the palm on one face and the fingers round an
-# edge; targets a little beyond the edge (large errors saturate the servos, and four saturated
-# fingers pushing on the rounded edge lift the palm off the face: measured).
-_GRASP = {"mcp_flex": 55.0, "pip": 30.0, "dip": 15.0}
-# The thumb lies on the surface beside the palm (a large link cannot be opposed across); at 0 the
-# thumb capsules protrude ~6 mm below the palmar plane and prop the palm up, so it is lifted.
-_GRASP_THUMB = {"thumb_cmc_abd": 5.0, "thumb_cmc_flex": -10.0, "thumb_mcp": 10.0, "thumb_ip": 10.0}
-_FLAT = {"mcp_flex": 10.0, "pip": 10.0, "dip": 5.0}  # conforms round the edge (torque-limited)
-_FLAT_THUMB = {"thumb_cmc_abd": -10.0, "thumb_cmc_flex": -15.0, "thumb_mcp": 0.0, "thumb_ip": 0.0}
-_HOOK = {"mcp_flex": 40.0, "pip": 45.0, "dip": 20.0}
-_TIPS = {"mcp_flex": 55.0, "pip": 40.0, "dip": 10.0}  # tips point at the skin
+_GRASP = {"mcp_flex": 70.0, "pip": 45.0, "dip": 20.0}  # beyond the edge: stop on the link
+_GRASP_THUMB = {"thumb_cmc_abd": 15.0, "thumb_cmc_flex": -10.0, "thumb_mcp": 10.0, "thumb_ip": 10.0}
+_DRAPE = {"mcp_flex": 65.0, "pip": 40.0, "dip": 15.0}  # relaxed fingers round an edge
+_FLAT = {"mcp_flex": 5.0, "pip": 5.0, "dip": 0.0}  # on a flat face: pads slightly pressed
+_FLAT_THUMB = {"thumb_cmc_abd": 10.0, "thumb_cmc_flex": -15.0, "thumb_mcp": 5.0, "thumb_ip": 5.0}
+_HOOK = {"mcp_flex": 50.0, "pip": 50.0, "dip": 20.0}
+_TIPS = {"mcp_flex": 20.0, "pip": 35.0, "dip": 10.0}  # with the wrist pitched: pads down
 _LIFTED = {"mcp_flex": -25.0, "pip": 0.0, "dip": 0.0}
 _CURLED = {"mcp_flex": 45.0, "pip": 60.0, "dip": 30.0}
-FREE_VARIANTS = ("flat", "fingertips", "palm", "curled")
-FREE_PROBS = (0.3, 0.5, 0.05, 0.15)  # fingertip touches are common in Fig. 6
+TIPS_PITCH_DEG = (20.0, 35.0)  # wrist pitch of fingertip touches (fingertips down), degrees
+FREE_VARIANTS = ("flat", "fingertips", "palm", "curled", "wrap")
+FREE_PROBS = (0.3, 0.35, 0.05, 0.1, 0.2)  # fingertip touches are common in Fig. 6
+
+
+@dataclass(frozen=True)
+class HandPose:
+    """Joint targets (suffix -> rad), palm shift (m along the hand's x, from the aim to the palm
+    centre), wrist pitch (rad, + = fingertips down) and the mode name."""
+
+    targets_rad: dict[str, float]
+    shift_m: float = 0.0
+    pitch_rad: float = 0.0
+    mode: str = "flat"
 
 
 def _limit_key(suffix: str) -> str:
@@ -50,44 +65,66 @@ def _noisy(pose_deg: dict[str, float], sd_deg: float, rng: np.random.Generator) 
     return out
 
 
-def _free_pose(subject: Subject, rng: np.random.Generator) -> tuple[dict[str, float], float]:
-    """Pose (deg) and fingertip offset (m, hand x from the palm centre; 0 = palm-centred)."""
-    variant = FREE_VARIANTS[int(rng.choice(len(FREE_VARIANTS), p=FREE_PROBS))]
-    if variant == "flat":
-        return {**_fingers(_FLAT), **_FLAT_THUMB}, 0.0
-    if variant == "palm":
-        return {**_fingers(_LIFTED), **_FLAT_THUMB}, 0.0
-    if variant == "curled":
-        return {**_fingers(_CURLED), **_GRASP_THUMB, "palm_arch": 5.0}, 0.0
-    n = int(rng.integers(1, 5))
-    down = [str(f) for f in rng.choice(FINGERS, size=n, replace=False)]
-    up = [f for f in FINGERS if f not in down]
-    pose = {**_fingers(_TIPS, down), **_fingers(_LIFTED, up), **_FLAT_THUMB}
-    return pose, fingertip_reach_m(subject, down)
+def mcp_offset_m(subject: Subject) -> float:
+    """Distance (m) along the hand's x from the palm centre to the middle finger's MCP."""
+    geo = hand_geometry(subject.hand.length_m, subject.hand.breadth_m)
+    return float(geo.mcp_m["middle"][0] - 0.3 * geo.length_m)
 
 
 def fingertip_reach_m(subject: Subject, fingers: list[str]) -> float:
-    """Mean distance (m) along hand x from the palm centre to the tips of ``fingers`` in the
-    fingertips pose (proximal phalanx at `_TIPS` mcp flexion, the rest pointing down)."""
+    """Mean distance (m) along hand x from the palm centre to the tips of ``fingers`` (straight)."""
     geo = hand_geometry(subject.hand.length_m, subject.hand.breadth_m)
-    mcp = np.deg2rad(_TIPS["mcp_flex"])
-    reach = [geo.mcp_m[f][0] + geo.lengths_m[f][1] * np.cos(mcp) for f in fingers]
+    reach = [geo.mcp_m[f][0] + geo.lengths_m[f][1:].sum() for f in fingers]
     return float(np.mean(reach) - 0.3 * geo.length_m)
 
 
-def finger_pose(
-    action: str, subject: Subject, rng: np.random.Generator
-) -> tuple[dict[str, float], float]:
-    """(joint suffix -> target rad, fingertip offset m) of ``action`` with the subject's noise."""
+def _fingertips(subject: Subject, rng: np.random.Generator) -> tuple[dict, float, float]:
+    """Pose (deg), shift (m) and pitch (rad) of a touch with 1-4 fingertips."""
+    down = [str(f) for f in rng.choice(FINGERS, size=int(rng.integers(1, 5)), replace=False)]
+    up = [f for f in FINGERS if f not in down]
+    pose = {**_fingers(_TIPS, down), **_fingers(_LIFTED, up), **_FLAT_THUMB}
+    pitch = np.deg2rad(rng.uniform(*TIPS_PITCH_DEG))
+    return pose, -0.8 * fingertip_reach_m(subject, down), float(pitch)
+
+
+def _mode_pose(mode: str, wrap_shift_m: float | None) -> tuple[dict, float]:
+    """Pose (deg) and shift (m) of the palm-on-face modes."""
+    if mode == "grasp":
+        return {**_fingers(_GRASP), **_GRASP_THUMB, "palm_arch": 10.0}, wrap_shift_m or 0.0
+    if mode == "hook":
+        return {**_fingers(_HOOK), **_FLAT_THUMB, "palm_arch": 5.0}, wrap_shift_m or 0.0
+    if mode == "palm":
+        return {**_fingers(_LIFTED), **_FLAT_THUMB}, 0.0
+    if mode == "curled":
+        return {**_fingers(_CURLED), **_GRASP_THUMB, "palm_arch": 5.0}, 0.0
+    if wrap_shift_m is not None:  # flat hand whose fingers cross an edge: they drape round it
+        return {**_fingers(_DRAPE), **_FLAT_THUMB, "palm_arch": 5.0}, wrap_shift_m
+    return {**_fingers(_FLAT), **_FLAT_THUMB}, 0.0
+
+
+def action_mode(action: str, rng: np.random.Generator) -> str:
+    """Hand mode of ``action``: grasp, hook (pull), flat (pushes) or a drawn free variant."""
     if action.startswith("grasp"):
-        pose, reach = {**_fingers(_GRASP), **_GRASP_THUMB, "palm_arch": 5.0}, 0.0
-    elif action == "pull":
-        pose, reach = {**_fingers(_HOOK), **_FLAT_THUMB, "palm_arch": 3.0}, 0.0
-    elif action == "free":
-        pose, reach = _free_pose(subject, rng)
+        return "grasp"
+    if action == "pull":
+        return "hook"
+    if action == "free":
+        variant = FREE_VARIANTS[int(rng.choice(len(FREE_VARIANTS), p=FREE_PROBS))]
+        return "grasp" if variant == "wrap" else variant
+    return "flat"
+
+
+def finger_pose(
+    mode: str, subject: Subject, rng: np.random.Generator, wrap_shift_m: float | None = None
+) -> HandPose:
+    """The `HandPose` of ``mode`` with the subject's noise; ``wrap_shift_m``: palm shift that puts
+    the MCP row on the edge the fingers cross (None: no edge within the fingers' reach)."""
+    pitch = 0.0
+    if mode == "fingertips":
+        pose, shift, pitch = _fingertips(subject, rng)
     else:
-        pose, reach = {**_fingers(_FLAT), **_FLAT_THUMB}, 0.0
-    return _noisy(pose, subject.pose_noise_deg, rng), reach
+        pose, shift = _mode_pose(mode, wrap_shift_m)
+    return HandPose(_noisy(pose, subject.pose_noise_deg, rng), shift, pitch, mode)
 
 
 def hand_direction(part: Part, taxel: int, yaw_rad: float) -> np.ndarray:

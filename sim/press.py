@@ -8,17 +8,21 @@ joints — slides ``press_x/y/z`` in the skin frame, then hinges ``press_yaw`` (
 per phase in `model.actuator_forcerange` (a model array: the compiled model is reused for every
 episode of the same contactor, only `body_pos`/`body_quat` of ``press`` and the limits change).
 
-Schedule (`controls`): approach = the root target descends from `APPROACH_HEIGHT_M` to the skin
-point; load = it sinks `PRESS_DEPTH_M` below while the normal force is capped at the plan's
-`force_n` (a force-limited servo: the force ramps with the target, then saturates); hold = the
-shear slides and the yaw hinge pull towards far targets capped at the plan's shear and twist;
-release = back up. Contactor joints (fingers) go from 0 to their plan targets during approach
-and the first half of load, torque-limited by the contactor's own actuators.
+Schedule (`root_schedule`, `schedule`; 100 Hz ticks precomputed per episode): approach = the
+root target descends from `APPROACH_HEIGHT_M` to the skin point; load = it sinks
+`PRESS_DEPTH_M` below while the normal force is capped at the plan's `force_n` (a force-limited
+servo: the force ramps with the target, then saturates); hold = the shear slides and the yaw
+hinge pull towards far targets capped at the plan's shear and twist; release = back up.
+Contactor joints (fingers) stay at 0 during the approach and go to their plan targets during the
+load, torque-limited by the contactor's own actuators: a hand's palm lands first, then the
+fingers close (closing during the approach, curled fingers met the link before the palm and
+propped it up: measured). A hand's wrist (tilt hinges) is stiffer than an object's
+(`HAND_TILT_KP`), so closing fingers cannot roll the palm off the face.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -39,6 +43,9 @@ SLIDE_KP = 2000.0  # N/m: force F is reached at F / kp behind the target (20 N a
 HOLD_FORCE_N = 20.0  # force limit of the tangential slides when they only hold position, N
 YAW_KP, YAW_HOLD_NM = 20.0, 2.0  # N m/rad, N m
 TILT_KP, TILT_LIMIT_NM = 6.0, 2.0  # compliant wrist: the contactor settles on the surface
+# A hand's wrist is held by the arm: stiffer, so that closing fingers (1-3 N each at 5-10 cm)
+# cannot roll the palm off the face (measured at 6 N m/rad: 10-20 deg, palm force -> 0).
+HAND_TILT_KP, HAND_TILT_LIMIT_NM = 30.0, 6.0  # N m/rad, N m (wrist torques reach 5-10 N m)
 ROOT_MASS_KG = 0.02  # root body mass, so a root made only of attached children is never massless
 
 
@@ -59,9 +66,12 @@ class PressScene:
     root_qpos: np.ndarray
     joint_act: dict[str, int]
     press_body: int
+    tilt_limit_nm: float = TILT_LIMIT_NM
+    plan_act: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # set by reset
+    plan_target: np.ndarray = field(default_factory=lambda: np.zeros(0))  # rad, set by reset
 
 
-def _add_root(spec: mujoco.MjSpec) -> None:
+def _add_root(spec: mujoco.MjSpec, tilt_kp: float = TILT_KP) -> None:
     """Six joints and force-limited position actuators on the attached contactor root."""
     root = spec.body(PREFIX + ROOT)
     root.explicitinertial, root.mass = True, ROOT_MASS_KG
@@ -71,7 +81,7 @@ def _add_root(spec: mujoco.MjSpec) -> None:
         slide = k < 3
         kind = mujoco.mjtJoint.mjJNT_SLIDE if slide else mujoco.mjtJoint.mjJNT_HINGE
         root.add_joint(name=f"press_{name}", type=kind, axis=axis, armature=0 if slide else 1e-3)
-        kp = SLIDE_KP if slide else (YAW_KP if name == "yaw" else TILT_KP)
+        kp = SLIDE_KP if slide else (YAW_KP if name == "yaw" else tilt_kp)
         act = spec.add_actuator(
             name=f"press_{name}", target=f"press_{name}", trntype=mujoco.mjtTrn.mjTRN_JOINT,
             forcelimited=mujoco.mjtLimited.mjLIMITED_TRUE, forcerange=[-1.0, 1.0],
@@ -88,7 +98,7 @@ def scene_spec(part: Part, contactor: ContactorSpec, timestep_s: float) -> mujoc
     add_part(spec, part)
     press = spec.worldbody.add_body(name="press")
     spec.attach(contactor.spec.copy(), frame=press.add_frame(), prefix=PREFIX)
-    _add_root(spec)
+    _add_root(spec, HAND_TILT_KP if contactor.kind == "hand" else TILT_KP)
     return spec
 
 
@@ -107,52 +117,82 @@ def build_press_scene(part: Part, contactor: ContactorSpec, timestep_s: float) -
         model, mujoco.MjData(model), readout,
         np.array([contactor.geom_labels[n] for n in names], dtype=np.int64), root_act,
         np.asarray(qadr), joint_act, model.body("press").id,
+        HAND_TILT_LIMIT_NM if contactor.kind == "hand" else TILT_LIMIT_NM,
     )
 
 
-def _ramp(t: float, t0: float, t1: float) -> float:
-    """0 before t0, 1 after t1, smoothstep in between."""
+def _ramp(t: np.ndarray, t0: float, t1: float) -> np.ndarray:
+    """0 before t0, 1 after t1, smoothstep in between; t : (T,) s."""
+    t = np.asarray(t, dtype=float)
     if t1 <= t0:
-        return float(t >= t1)
-    s = min(max((t - t0) / (t1 - t0), 0.0), 1.0)
+        return (t >= t1).astype(float)
+    s = np.clip((t - t0) / (t1 - t0), 0.0, 1.0)
     return s * s * (3.0 - 2.0 * s)
+
+
+def root_schedule(plan: PressPlan, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Targets (T, 6) (m, rad) and force limits (T, 6) (N, N m) of the root at times (T,) s."""
+    t = np.asarray(times_s, dtype=float)
+    a, lo, h, _ = np.cumsum(plan.durations_s)
+    sink = _ramp(t, a, lo) - _ramp(t, h, plan.total_s)
+    hold = _ramp(t, lo, lo + 0.5 * plan.durations_s[2]) * (t < h)
+    z = APPROACH_HEIGHT_M * (1.0 - _ramp(t, 0.0, a) + _ramp(t, h, plan.total_s))
+    shear, twist = np.asarray(plan.shear_n, dtype=float), plan.twist_nm
+    target = np.column_stack([
+        SHEAR_TRAVEL_M * np.sign(shear[0]) * hold, SHEAR_TRAVEL_M * np.sign(shear[1]) * hold,
+        z - PRESS_DEPTH_M * sink, plan.yaw_rad + TWIST_TRAVEL_RAD * np.sign(twist) * hold,
+        np.broadcast_to(plan.tilt_rad, (t.size, 2)),
+    ])
+    holding = hold[:, None] > 0
+    lim_xy = np.where(holding & (shear != 0), np.abs(shear), HOLD_FORCE_N)
+    lim_yaw = np.where(holding[:, 0] & (twist != 0), abs(twist), YAW_HOLD_NM)
+    fixed = np.broadcast_to([plan.force_n], (t.size, 1))
+    limit = np.column_stack([lim_xy, fixed, lim_yaw, np.full((t.size, 2), TILT_LIMIT_NM)])
+    return target, limit
 
 
 def root_controls(plan: PressPlan, t: float) -> tuple[np.ndarray, np.ndarray]:
     """Targets (6,) (m, rad) and force limits (6,) (N, N m) of the root at time ``t`` (s)."""
-    a, lo, h, _ = np.cumsum(plan.durations_s)
-    down = _ramp(t, 0.0, a)
-    sink = _ramp(t, a, lo) - _ramp(t, h, plan.total_s)
-    hold = _ramp(t, lo, lo + 0.5 * plan.durations_s[2]) * (t < h)
-    up = _ramp(t, h, plan.total_s)
-    z = APPROACH_HEIGHT_M * (1.0 - down + up) - PRESS_DEPTH_M * sink
-    shear = np.asarray(plan.shear_n, dtype=float)
-    twist = plan.twist_nm
-    target = np.array([
-        SHEAR_TRAVEL_M * np.sign(shear[0]) * hold, SHEAR_TRAVEL_M * np.sign(shear[1]) * hold, z,
-        plan.yaw_rad + TWIST_TRAVEL_RAD * np.sign(twist) * hold, *plan.tilt_rad,
-    ])
-    lim_xy = np.where((hold > 0) & (shear != 0), np.abs(shear), HOLD_FORCE_N)
-    lim_yaw = abs(twist) if hold > 0 and twist else YAW_HOLD_NM
-    limit = np.array([*lim_xy, plan.force_n, lim_yaw, TILT_LIMIT_NM, TILT_LIMIT_NM])
-    return target, limit
+    target, limit = root_schedule(plan, np.array([t]))
+    return target[0], limit[0]
 
 
-def finger_fraction(plan: PressPlan, t: float) -> float:
-    """How far the contactor joints are from 0 (1 = plan targets) at time ``t`` (s)."""
+def finger_fraction(plan: PressPlan, t: np.ndarray | float) -> np.ndarray:
+    """How far the contactor joints are from 0 (1 = plan targets) at time(s) ``t`` (s): they close
+    during the load phase, after the root has brought the contactor (a palm) onto the skin."""
     a, lo, h, _ = np.cumsum(plan.durations_s)
     return _ramp(t, a, lo) - _ramp(t, h, plan.total_s)
 
 
+@dataclass(frozen=True)
+class Schedule:
+    """Controls at T ticks: root targets (T, 6), root force limits (T, 6), joint ctrl (T, J)."""
+
+    root_target: np.ndarray
+    root_limit: np.ndarray
+    joint_ctrl: np.ndarray
+
+
+def schedule(scene: PressScene, plan: PressPlan, times_s: np.ndarray) -> Schedule:
+    """The controls of ``plan`` at times (T,) s (after `reset` with the same plan)."""
+    target, limit = root_schedule(plan, times_s)
+    limit[:, 4:] = scene.tilt_limit_nm
+    frac = finger_fraction(plan, times_s)
+    return Schedule(target, limit, frac[:, None] * scene.plan_target[None, :])
+
+
+def apply_tick(scene: PressScene, sched: Schedule, i: int) -> None:
+    """Write tick ``i`` of ``sched`` into ctrl and the root force limits."""
+    scene.data.ctrl[scene.root_act] = sched.root_target[i]
+    scene.model.actuator_forcerange[scene.root_act, 0] = -sched.root_limit[i]
+    scene.model.actuator_forcerange[scene.root_act, 1] = sched.root_limit[i]
+    scene.data.ctrl[scene.plan_act] = sched.joint_ctrl[i]
+
+
 def apply_controls(scene: PressScene, plan: PressPlan, t: float) -> None:
-    """Write the schedule at time ``t`` (s) into ctrl and the root force limits."""
-    target, limit = root_controls(plan, t)
-    scene.data.ctrl[scene.root_act] = target
-    scene.model.actuator_forcerange[scene.root_act, 0] = -limit
-    scene.model.actuator_forcerange[scene.root_act, 1] = limit
-    frac = finger_fraction(plan, t)
-    for name, value in plan.joint_targets.items():
-        scene.data.ctrl[scene.joint_act[name]] = frac * value
+    """Write the schedule at time ``t`` (s) into ctrl and the root force limits (after `reset`
+    with the same plan, which caches its joint targets on the scene)."""
+    apply_tick(scene, schedule(scene, plan, np.array([t])), 0)
 
 
 def reset(scene: PressScene, plan: PressPlan, pos_m: np.ndarray, quat: np.ndarray) -> None:
@@ -160,6 +200,9 @@ def reset(scene: PressScene, plan: PressPlan, pos_m: np.ndarray, quat: np.ndarra
     m, d = scene.model, scene.data
     m.body_pos[scene.press_body], m.body_quat[scene.press_body] = pos_m, quat
     mujoco.mj_resetData(m, d)
+    names = list(plan.joint_targets)
+    scene.plan_act = np.array([scene.joint_act[n] for n in names], dtype=np.int64)
+    scene.plan_target = np.array([plan.joint_targets[n] for n in names], dtype=float)
     target, _ = root_controls(plan, 0.0)
     d.qpos[scene.root_qpos] = target
     apply_controls(scene, plan, 0.0)

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim import press
+from sim import placement, press
 from sim.contactors import PressPlan, sphere_contactor
 from sim.episode import (
     FRAME_DT_S,
@@ -20,6 +20,7 @@ from sim.episode import (
     run_sample,
     site_pose,
 )
+from sim.parts import get_part
 from tactile.dataset.schema import Dims, validate_sample
 from tactile.errors import ConfigError
 
@@ -53,11 +54,29 @@ def test_sphere_activates_the_closed_form_taxels(ctx):
 
 
 def test_press_frame_follows_the_skin_normal(ctx):
+    """The site (0, 0) mm of the plate's lattice is its top face's centre (z = 0, normal +z)."""
     k, pos, quat = site_pose(ctx, PLAN, np.random.default_rng(0))
     mat = np.zeros(9)
     mujoco.mju_quat2Mat(mat, quat)
     assert np.allclose(mat.reshape(3, 3)[:, 2], ctx.part.layout.normals[k])
-    assert np.allclose(pos, ctx.part.layout.positions_m[k])
+    assert np.allclose(pos, [0.0, 0.0, 0.0], atol=1e-9)
+    assert np.linalg.norm(ctx.part.flat_mm[k]) < 10.0  # the nearest taxel
+
+
+def test_forearm_site_between_taxels_lies_on_the_link():
+    """A lattice point between taxels maps onto the forearm's surface (distance to the mesh from
+    trimesh's exact closest point) with the normal of its nearest taxel's neighbourhood."""
+    import trimesh
+
+    part = get_part("forearm")
+    rng = np.random.default_rng(5)
+    for k in rng.integers(part.n_taxels, size=5):
+        uv = part.flat_mm[k] + rng.uniform(-4.0, 4.0, 2)
+        pos, normal = placement.surface_point(part, uv)
+        _, dist, _ = trimesh.proximity.closest_point_naive(part.link, pos[None])
+        assert dist[0] < 5e-4
+        assert normal @ part.layout.normals[k] > np.cos(np.deg2rad(20))
+        assert np.linalg.norm(pos - part.layout.positions_m[k]) < 0.008
 
 
 def test_sensors_off_between_frames_give_the_same_readings(ctx):

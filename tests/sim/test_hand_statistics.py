@@ -1,7 +1,10 @@
 """Statistics over 320 generated hand samples (fixed seeds) against the paper's figures.
 
 Albini & Cannata (IJRR 2020): the palm is about 40 % of hand-labelled pixels (Fig. 10); grasps
-show several fingers; seven actions from two operator positions plus free touches.
+show several fingers; seven actions from two operator positions plus free touches. Measured on
+the default forearm (64 modules at 10.6 mm pad pitch, seed 2020): median 17 active taxels per
+hand contact (quartiles 11 / 25), palm 0.47 of hand pixels, 0.53 of grasps with >= 3 fingers,
+2 rejects (no contact) in 320.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from sim.subjects import sample_subjects
 
 N_SAMPLES, SEED = 320, 2020
 PALM = 6
+GRASPS = (0, 1, 2)  # grasp, grasp + twist cw / ccw
 
 
 @pytest.fixture(scope="module")
@@ -29,14 +33,18 @@ def stats() -> dict:
         sample, rej = sample_hand(i, SEED, ctx, subjects)
         rejects.update(rej)
         rows.append(sample)
-    return {"samples": rows, "rejects": rejects}
+    return {"samples": rows, "rejects": rejects, "active_pa": ctx.cfg.active_pa}
 
 
 def test_every_action_and_both_operator_positions_occur(stats):
     actions = Counter(int(s["action"]) for s in stats["samples"])
     positions = Counter(int(s["operator_position"]) for s in stats["samples"])
     assert set(actions) == set(range(len(ACTIONS)))
+    assert min(actions.values()) >= 0.5 * N_SAMPLES / len(ACTIONS)
     assert {0, 1, 2} <= set(positions)
+    for action in range(len(ACTIONS) - 1):  # every paper action from both positions
+        seen = {int(s["operator_position"]) for s in stats["samples"] if s["action"] == action}
+        assert seen == {0, 1}, ACTIONS[action]
 
 
 def test_palm_share_of_hand_pixels_is_near_the_papers(stats):
@@ -45,17 +53,16 @@ def test_palm_share_of_hand_pixels_is_near_the_papers(stats):
     assert 0.25 <= share <= 0.55
 
 
-@pytest.mark.xfail(strict=False, reason="banded forearm layout (windows between 3 "
-                   "bands): median 20 active taxels measured (seed 2020); a hand spans one band")
+@pytest.mark.xfail(strict=False, reason="measured median 17 active taxels per hand contact "
+                   "(seed 2020, 10.6 mm pitch forearm): rigid capsules touch the rounded faces "
+                   "in strips; a 2x softer palm gave 25 but a palm pixel share of 0.60")
 def test_median_active_taxels_per_contact(stats):
-    active = [int((s["pressure_pa"] > 500.0).sum()) for s in stats["samples"]]
+    active = [int((s["pressure_pa"] > stats["active_pa"]).sum()) for s in stats["samples"]]
     assert 40 <= np.median(active) <= 250
 
 
-@pytest.mark.xfail(strict=False, reason="fingers wrap the link's edge and often land "
-                   "on uncovered windows; 14 % of grasps show >= 3 finger classes (seed 2020)")
 def test_grasps_show_at_least_three_fingers_in_half(stats):
-    grasps = [s for s in stats["samples"] if int(s["action"]) in (0, 1, 2)]
+    grasps = [s for s in stats["samples"] if int(s["action"]) in GRASPS]
     fingers = [len(set(np.unique(s["label_image"])) & {1, 2, 3, 4, 5}) for s in grasps]
     assert np.mean(np.array(fingers) >= 3) >= 0.5
 
@@ -63,4 +70,4 @@ def test_grasps_show_at_least_three_fingers_in_half(stats):
 def test_rejects_are_rare_and_named(stats):
     total = sum(stats["rejects"].values())
     assert set(stats["rejects"]) <= {"warning", "nan", "too_deep", "no_contact"}
-    assert total < 0.3 * N_SAMPLES
+    assert total < 0.1 * N_SAMPLES
