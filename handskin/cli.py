@@ -34,6 +34,7 @@ def _root(
 
 
 def _register() -> None:
+    from learn.cli import register as register_learn
     from sim.cli import register as register_sim
     from sim.view_cli import register as register_view
     from tactile.cli import register as register_tactile
@@ -43,6 +44,7 @@ def _register() -> None:
     register_sim(app)
     register_dataset(app)
     register_view(app)
+    register_learn(app)
 
 
 _register()

@@ -27,6 +27,7 @@ class Outer:
     name: str = "forearm"
     hand_fraction: float | None = None
     inner: Inner = field(default_factory=Inner)
+    lr_factors: dict[str, float] = field(default_factory=dict)  # e.g. {"first_two_convs": 0.1}
 
 
 def test_toml_file_fills_nested_fields_and_keeps_defaults(tmp_path: Path):
@@ -34,6 +35,14 @@ def test_toml_file_fills_nested_fields_and_keeps_defaults(tmp_path: Path):
     path.write_text('n = 5\n[inner]\nnoise_counts = 20\nshape = [34, 50]\n')
     cfg = load_config(path, Outer)
     assert cfg == Outer(n=5, inner=Inner(noise_counts=20.0, shape=(34, 50)))
+
+
+def test_mapping_fields_read_tables_with_typed_values(tmp_path: Path):
+    path = tmp_path / "m.toml"
+    path.write_text("[lr_factors]\nfirst_two_convs = 0.1\nlast_layer = 1\n")
+    assert load_config(path, Outer).lr_factors == {"first_two_convs": 0.1, "last_layer": 1.0}
+    with pytest.raises(ConfigError, match=r"lr_factors\.x: expected float"):
+        from_dict(Outer, {"lr_factors": {"x": "fast"}})
 
 
 def test_round_trip_through_toml_text(tmp_path: Path):
@@ -46,7 +55,7 @@ def test_round_trip_through_toml_text(tmp_path: Path):
 @pytest.mark.parametrize(
     ("table", "message"),
     [
-        ({"m": 1}, "unknown key 'm'.*known keys: hand_fraction, inner, n, name"),
+        ({"m": 1}, "unknown key 'm'.*known keys: hand_fraction, inner, lr_factors, n, name"),
         ({"inner": {"noise": 1}}, r"unknown key 'inner.noise'.*noise_counts, shape"),
         ({"n": 1.5}, "n: expected int"),
         ({"n": True}, "n: expected int"),

@@ -1,0 +1,118 @@
+"""Checkpoints as plain dicts (nanoGPT style), safe to read with ``torch.load(weights_only=True)``.
+
+    ckpt = {"model": state_dict, "optimizer": state_dict, "scheduler": state_dict,
+            "config": {...}, "epoch": int, "best_metric": float, "history": [...],
+            "class_names": [...], "versions": {...}, "seed": int}
+
+``config`` is the resolved :class:`learn.train.RunConfig` as a JSON-able dict
+(``tactile.config.to_dict``); ``epoch`` is the number of completed epochs; ``history`` holds one
+dict of losses and metrics per epoch. Files are written atomically (temporary name, then
+``os.replace``) so a killed run never leaves half a checkpoint.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+from collections.abc import Mapping
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from tactile.errors import DataError
+
+LAST, BEST = "last.pt", "best.pt"  # file names in a run folder
+REQUIRED_KEYS = ("model", "config", "epoch", "best_metric")
+PACKAGES = ("numpy", "torch", "scikit-learn", "scikit-image", "h5py", "handskin")
+
+
+def versions() -> dict[str, str]:
+    """Python and package versions (package metadata; "absent" when not installed)."""
+    out = {"python": platform.python_version(), "torch_runtime": str(torch.__version__)}
+    for name in PACKAGES:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            out[name] = "absent"
+    return out
+
+
+def _plain(value: object) -> object:
+    """Numpy scalars and arrays to Python numbers and lists (safe-mode loadable)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+def make_checkpoint(
+    model: nn.Module,
+    config: Mapping[str, object],
+    *,
+    epoch: int,
+    best_metric: float,
+    optimizer: torch.optim.Optimizer | None = None,
+    scheduler: torch.optim.lr_scheduler.LRScheduler | None = None,
+    **extra: object,
+) -> dict[str, object]:
+    """The checkpoint dict of a run after ``epoch`` completed epochs (see the module docstring).
+
+    ``extra`` (history, class_names, seed, metrics, ...) is stored as plain Python values.
+    """
+    ckpt: dict[str, object] = {
+        "model": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
+        "config": _plain(config),
+        "epoch": int(epoch),
+        "best_metric": float(best_metric),
+        "versions": versions(),
+    }
+    if optimizer is not None:
+        ckpt["optimizer"] = optimizer.state_dict()
+    if scheduler is not None:
+        ckpt["scheduler"] = scheduler.state_dict()
+    ckpt.update({k: _plain(v) for k, v in extra.items()})
+    return ckpt
+
+
+def save_checkpoint(ckpt: Mapping[str, object], path: str | Path) -> Path:
+    """Write ``ckpt`` atomically to ``path`` (parents created); returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    torch.save(dict(ckpt), tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def model_from_checkpoint(ckpt: Mapping) -> tuple[nn.Module, object]:
+    """The trained model (eval mode) and the ``learn.train.RunConfig`` of a checkpoint dict."""
+    from learn.models import create_model
+    from learn.train import run_from_dict
+
+    run = run_from_dict(ckpt["config"])
+    model = create_model(run.model.arch, **run.model.kwargs())
+    model.load_state_dict(ckpt["model"])
+    return model.eval(), run
+
+
+def load_checkpoint(path: str | Path) -> dict[str, object]:
+    """Read a checkpoint in ``torch.load`` safe mode; DataError naming the file and the fix."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"no checkpoint at {path}. Fix: give a .pt file written by handskin train")
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:  # unpickling errors come in many types
+        raise DataError(f"{path} is not a readable checkpoint ({err})") from err
+    missing = [k for k in REQUIRED_KEYS if not isinstance(ckpt, Mapping) or k not in ckpt]
+    if missing:
+        raise DataError(f"{path} lacks {missing}; it was not written by handskin train")
+    return dict(ckpt)

@@ -1,0 +1,262 @@
+"""`handskin train`, `handskin evaluate`, `handskin predict` (``register(app)`` adds them).
+
+Every input is checked (files exist, configuration valid, architecture known) before any work;
+errors print ``error: <what and how to fix>`` and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import importlib.util
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from tactile.errors import ConfigError, DataError, HandskinError
+
+PRESETS = ("handsnet", "vgg16", "segnet", "fcn16s")
+
+
+def _fail(err: Exception) -> typer.Exit:
+    typer.echo(f"error: {err.args[0] if isinstance(err, KeyError) else err}", err=True)
+    return typer.Exit(2)
+
+
+def _hand_classes(text: str | None) -> tuple[str, ...] | None:
+    return None if not text else tuple(t.strip() for t in text.split(",") if t.strip())
+
+
+def resolve_run(arch: str, config: Path | None, overrides: dict, test_c: bool):
+    """The RunConfig: the arch's preset, the TOML file over it, then command-line overrides."""
+    from learn import config as C
+    from learn.train import RunConfig, load_run_config, replace_train
+
+    if arch not in PRESETS:
+        raise ConfigError(f"unknown arch {arch!r}; choose one of: {', '.join(PRESETS)}")
+    preset = {"handsnet": C.HANDSNET, "vgg16": C.VGG16_FINETUNE, "segnet": C.SEGNET,
+              "fcn16s": C.FCN16S}[arch]  # fmt: skip
+    run = RunConfig(model=preset.model, train=C.FINETUNE_TEST_C if test_c else preset.train)
+    run = load_run_config(config, run) if config is not None else run
+    train = {k: v for k, v in overrides.items() if v is not None and k != "val_fraction"}
+    run = replace_train(run, **train) if train else run
+    if overrides.get("val_fraction") is not None:
+        run = dataclasses.replace(run, val_fraction=overrides["val_fraction"])
+    return run
+
+
+def _check_data(data: Path) -> None:
+    from learn.folder import is_dataset
+
+    if not (is_dataset(data) or data.is_dir()):
+        raise DataError(
+            f"no dataset or image folder at {data}. Fix: give a dataset folder "
+            "(holding dataset.h5) or a folder of class sub-folders of images"
+        )
+
+
+def _fit_classes(run, data):
+    """Classification on a folder keeping every class: num_classes follows the folders."""
+    n = len(data.class_names)
+    if run.task == "classify" and n != run.model.num_classes:
+        typer.echo(f"num_classes set to {n} ({', '.join(data.class_names)})")
+        run = dataclasses.replace(run, model=dataclasses.replace(run.model, num_classes=n))
+    return run
+
+
+def _opt(kind, help_text: str, *names: str):
+    """``Annotated[kind, typer.Option(*names, help=help_text)]``."""
+    return Annotated[kind, typer.Option(*names, help=help_text)]
+
+
+DataArg = Annotated[Path, typer.Argument(help="Dataset folder (dataset.h5) or image folder.")]
+OutOpt = _opt(Path, "Run folder: checkpoints, curves.png, run.toml.")
+ArchOpt = _opt(str, "handsnet | vgg16 | segnet | fcn16s (its preset configuration).")
+ConfigOpt = _opt(Path | None, "TOML run config: model and train tables and top-level "
+                 "RunConfig keys, laid over the arch's preset.")
+EpochsOpt = _opt(int | None, "Epochs (each a pass over 3x the train images).")
+BatchOpt = _opt(int | None, "Images per optimisation step.")
+LrOpt = _opt(float | None, "Initial learning rate (dimensionless, per step).")
+SeedOpt = _opt(int | None, "Seed of init, shuffling and splits (integer).")
+ValOpt = _opt(float | None, "Share (0-1) of the train split's subjects held out for validation.")
+HandOpt = _opt(str | None, "Image folders: comma-separated folder names that are 'hand' "
+               "(e.g. hand,finger); default: every folder its own class.")
+InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file).")
+TestCOpt = _opt(bool, "The paper's Test C schedule: lr 0.01 halved at epoch 60 of 120, batch 128 "
+                "images, lr x 0.1 on the first two convolutions.")
+ResumeOpt = _opt(bool, "Continue from OUT/last.pt.")
+GridOpt = _opt(str | None, "Cross-validate first over a grid, e.g. "
+               "'train.lr=0.01,0.001;train.batch_size=32,64' (each value in its field's unit).")
+FoldsOpt = _opt(int, "Folds of the cross-validation (count).")
+ProgressOpt = _opt(bool, "Show progress bars.")
+
+
+def train_command(
+    data: DataArg,
+    out: OutOpt,
+    arch: ArchOpt = "handsnet",
+    config: ConfigOpt = None,
+    epochs: EpochsOpt = None,
+    batch_size: BatchOpt = None,
+    lr: LrOpt = None,
+    seed: SeedOpt = None,
+    val_fraction: ValOpt = None,
+    hand_classes: HandOpt = None,
+    init: InitOpt = None,
+    test_c: TestCOpt = False,
+    resume: ResumeOpt = False,
+    cv_grid: GridOpt = None,
+    cv_folds: FoldsOpt = 5,
+    progress: ProgressOpt = True,
+) -> None:
+    """Train a model; best.pt / last.pt, curves.png, run.toml and test_metrics.json in OUT."""
+    try:
+        _check_data(data)
+        if init is not None and not init.is_file():
+            raise DataError(f"no checkpoint at {init}. Fix: give a .pt file from handskin train")
+        over = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "seed": seed,
+                "val_fraction": val_fraction}  # fmt: skip
+        run = resolve_run(arch, config, over, test_c)
+        _train(run, data, out, _hand_classes(hand_classes), init, resume, cv_grid, cv_folds,
+               progress)  # fmt: skip
+    except (HandskinError, KeyError) as err:
+        raise _fail(err) from err
+
+
+def _train(run, data, out, hand, init, resume, cv_grid, cv_folds, progress) -> None:
+    from learn.checkpoint import versions
+    from learn.crossval import cross_validate, cv_markdown, parse_grid
+    from learn.evaluate import evaluate_tensors
+    from learn.train import fit, load_data
+    from tactile.config import to_dict
+
+    grid = parse_grid(cv_grid) if cv_grid else None
+    if grid:
+        cv = cross_validate(run, data, grid, k=cv_folds, hand_classes=hand)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "crossval.md").write_text(cv_markdown(cv) + "\n")
+        typer.echo(cv_markdown(cv))
+        run = cv.best_run
+    loaded = load_data(data, run, hand_classes=hand, progress=progress)
+    run = _fit_classes(run, loaded)
+    result = fit(run, loaded, out, resume=resume, init_from=init, progress=progress)
+    report = {"config": to_dict(run), "versions": versions(), "seed": run.train.seed,
+              "data": loaded.description, "best_val_metric": result.best_metric}  # fmt: skip
+    if loaded.test is not None:
+        res = evaluate_tensors(result.model, loaded.test, run.model.num_classes)
+        report |= {"test_metrics": res.metrics, "test_confusion": res.cm.tolist()}
+        typer.echo("test: " + ", ".join(f"{k} {v:.4f}" for k, v in res.metrics.items()))
+    (out / "test_metrics.json").write_text(json.dumps(report, indent=1))
+    typer.echo(f"run written to {out}")
+
+
+CkptsArg = Annotated[list[Path], typer.Argument(help="Checkpoints (.pt files) to evaluate.")]
+EvalDataOpt = _opt(Path, "Dataset folder or image folder (its test split is used).")
+ReportOpt = _opt(Path, "Markdown report to write (.md file; a .json beside it).")
+ThreadsOpt = _opt(int, "CPU threads used for the timing (count).")
+EvalHandOpt = _opt(str | None, "Image folders: hand folder names (default: the checkpoint's).")
+
+
+def evaluate_command(
+    checkpoints: CkptsArg,
+    data: EvalDataOpt,
+    report: ReportOpt = Path("report.md"),
+    threads: ThreadsOpt = 1,
+    hand_classes: EvalHandOpt = None,
+) -> None:
+    """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
+    from learn.checkpoint import load_checkpoint, versions
+    from learn.evaluate import evaluate_checkpoint, write_report
+
+    try:
+        _check_data(data)
+        for c in checkpoints:
+            load_checkpoint(c)
+        rows = [evaluate_checkpoint(c, data, hand_classes=_hand_classes(hand_classes),
+                                    threads=threads) for c in checkpoints]  # fmt: skip
+    except (HandskinError, KeyError) as err:
+        raise _fail(err) from err
+    header = f"Data: `{data}`. Versions: {json.dumps(versions())}."
+    write_report(rows, report, header)
+    report.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+    typer.echo(f"report written to {report}")
+
+
+ImageOpt = _opt(Path | None, "A tactile image file (grey PNG/JPG, any size in pixels).")
+FrameOpt = _opt(Path | None, "A taxel frame (.csv row or .npy) of N taxel or C channel values.")
+MapOpt = _opt(Path | None, "For --frame: a dataset folder (its map; values are raw counts, "
+              "converted to Pa) or a layout file (values used as given).", "--map")
+ClfOpt = _opt(Path | None, "Classifier checkpoint (.pt file).")
+SegOpt = _opt(Path | None, "Segmenter checkpoint (.pt file).")
+PngOpt = _opt(Path | None, "Write the picture here (PNG file).")
+StepOpt = _opt(float, "Grid step of the map built from a layout file, mm/pixel.")
+
+
+def predict_command(
+    image: ImageOpt = None,
+    frame: FrameOpt = None,
+    map_: MapOpt = None,
+    classifier: ClfOpt = None,
+    segmenter: SegOpt = None,
+    png: PngOpt = None,
+    step_mm: StepOpt = 1.0,
+) -> None:
+    """Class + probability, segmentation, per-part taxel count and mean pressure, a picture."""
+    from learn import predict as P
+
+    try:
+        if (image is None) == (frame is None) or (frame is not None and map_ is None):
+            raise ConfigError("give either --image, or --frame with --map")
+        if classifier is None and segmenter is None:
+            raise ConfigError("give --classifier, --segmenter or both")
+        clf = None if classifier is None else P.load_predictor(classifier)
+        seg = None if segmenter is None else P.load_predictor(segmenter)
+        pred = _predict(P, image, frame, map_, clf, seg, step_mm)
+    except (HandskinError, KeyError) as err:
+        raise _fail(err) from err
+    _echo_prediction(pred)
+    if png is not None:
+        P.save_picture(pred, png)
+        typer.echo(f"picture written to {png}")
+
+
+def _predict(P, image, frame, map_, clf, seg, step_mm):
+    if image is not None:
+        return P.predict_image(P.load_image(image), clf, seg)
+    tmap, layout, to_pa = P.load_map(map_, step_mm)
+    return P.predict_frame(to_pa(P.read_frame(frame, layout)), tmap, clf, seg)
+
+
+def _echo_prediction(pred) -> None:
+    if pred.class_name is not None:
+        typer.echo(f"class {pred.class_name} (probability {pred.probability:.4f})")
+    if pred.parts is not None:
+        for name, s in pred.parts.items():
+            typer.echo(f"{name:7s} {s.n_taxels:5d} taxels, mean pressure {s.mean_pressure:.4g}")
+
+
+def _needs_torch(command):
+    """``command`` preceded by a clear error when PyTorch is not installed (it is an extra)."""
+
+    @functools.wraps(command)
+    def checked(*args, **kwargs):
+        if importlib.util.find_spec("torch") is None:
+            typer.echo(
+                "error: this command needs PyTorch, which handskin installs only with its 'learn' "
+                "extra. Fix: pip install 'handskin[learn]' (on a machine without a GPU, install "
+                "the CPU wheel of torch first)",
+                err=True,
+            )
+            raise typer.Exit(2)
+        return command(*args, **kwargs)
+
+    return checked
+
+
+def register(app: typer.Typer) -> None:
+    """Add `train`, `evaluate` and `predict` to the `handskin` app."""
+    app.command("train")(_needs_torch(train_command))
+    app.command("evaluate")(_needs_torch(evaluate_command))
+    app.command("predict")(_needs_torch(predict_command))

@@ -1,0 +1,294 @@
+"""Evaluation: metrics and confusion matrices of a model on tensors, the fast CPU inference
+path, time per image, loss curves, and the markdown report beside the paper's Tables 3 and 8.
+
+    res = evaluate_tensors(model, data.test, num_classes=2)   # res.metrics, res.cm, res.percent
+    fast = fast_inference(model)           # BN folded, channels-last, bf16 where it is safe
+    row = evaluate_checkpoint("runs/handsnet/best.pt", "out/forearm")
+    write_report([row, ...], "report.md")
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from matplotlib.figure import Figure
+from torch import nn
+
+from learn import metrics as M
+from learn.models import prepare_for_inference
+
+CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
+
+
+@dataclass
+class EvalResult:
+    """Confusion matrix ``cm`` (C, C) int64 (rows true), scores (fractions), mean loss."""
+
+    cm: torch.Tensor
+    metrics: dict[str, float]
+    loss: float
+
+    @property
+    def percent(self) -> torch.Tensor:
+        """(C, C) float64: rows as percentages of the true class (the paper's tables)."""
+        return M.percent_by_true_class(self.cm)
+
+
+def logits_of(model: nn.Module, x: torch.Tensor, batch_size: int = 64) -> torch.Tensor:
+    """Logits of ``x`` (S, 1, h, w) in eval mode under ``torch.no_grad``, batch by batch."""
+    model.eval()
+    with torch.no_grad():
+        batches = [model(x[i : i + batch_size]).float() for i in range(0, len(x), batch_size)]
+    return torch.cat(batches)
+
+
+def scores(cm: torch.Tensor) -> dict[str, float]:
+    """Accuracy, mean class accuracy and (for any task) Long et al.'s IoU scores, fractions."""
+    return {"accuracy": M.accuracy(cm), **M.segmentation_scores(cm)}
+
+
+def evaluate_tensors(
+    model: nn.Module, data, num_classes: int, batch_size: int = 64, loss_fn: nn.Module | None = None
+) -> EvalResult:
+    """Metrics of ``model`` on ``data`` (``TensorData``: x (S, 1, h, w), y (S,) or (S, h, w)).
+
+    The model is left in eval mode. ``loss`` is the mean of ``loss_fn`` over batches (NaN
+    without a loss function).
+    """
+    cms, losses = [], []
+    for i in range(0, len(data.y), batch_size):
+        x, y = data.x[i : i + batch_size], data.y[i : i + batch_size]
+        out = logits_of(model, x, batch_size)
+        cms.append(M.confusion_matrix(y, out.argmax(1), num_classes))
+        if loss_fn is not None:
+            with torch.no_grad():
+                losses.append(float(loss_fn(out, y)) * len(y))
+    cm = torch.stack(cms).sum(0)
+    loss = sum(losses) / len(data.y) if losses else float("nan")
+    return EvalResult(cm, scores(cm), loss)
+
+
+class FastInference(nn.Module):
+    """A prepared model (BN folded, channels-last weights) fed channels-last input, optionally
+    with its weights stored in bfloat16 (cast once, not per call as autocast would); returns
+    float32 logits. Keeps the wrapped model's attributes."""
+
+    def __init__(self, prepared: nn.Module, bf16: bool) -> None:
+        super().__init__()
+        self.net = copy.deepcopy(prepared).to(torch.bfloat16) if bf16 else prepared
+        self.bf16 = bf16
+        for name in ("num_classes", "in_channels", "task", "input_size"):
+            if hasattr(prepared, name):
+                setattr(self, name, getattr(prepared, name))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``(B, C, H, W)`` → logits of the wrapped model, float32."""
+        dtype = torch.bfloat16 if self.bf16 else torch.float32
+        return self.net(x.to(dtype).contiguous(memory_format=torch.channels_last)).float()
+
+
+def bf16_supported() -> bool:
+    """True when oneDNN has native bfloat16 kernels on this CPU (AVX512-BF16 / AMX)."""
+    try:
+        return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+    except (AttributeError, RuntimeError):
+        return False
+
+
+def agreement(a: nn.Module, b: nn.Module, x: torch.Tensor) -> float:
+    """Fraction of argmax predictions (images or pixels) on which two models agree."""
+    with torch.inference_mode():
+        return float((a(x).argmax(1) == b(x).argmax(1)).double().mean())
+
+
+def fast_inference(model: nn.Module, *, bf16: bool | None = None, check: torch.Tensor | None = None,
+                   min_agreement: float = 1.0) -> nn.Module:  # fmt: skip
+    """The default CPU inference path: ``prepare_for_inference`` + channels-last input + bf16.
+
+    bf16 (default: classifiers on CPUs with native bf16) is kept only if the argmax agrees with
+    the float model on ``check`` images (default: 32 seeded uniform random images) at least
+    ``min_agreement`` of the time; otherwise the float path is returned.
+    """
+    prepared = prepare_for_inference(model)
+    if bf16 is None:
+        bf16 = getattr(model, "task", "") == "classification" and bf16_supported()
+    float_path = FastInference(prepared, False).eval()
+    if not bf16:
+        return float_path
+    if check is None:
+        size = getattr(model, "input_size", (68, 100))
+        gen = torch.Generator().manual_seed(CHECK_SEED)
+        check = torch.rand(32, getattr(model, "in_channels", 1), *size, generator=gen)
+    fast = FastInference(prepared, True).eval()
+    return fast if agreement(fast, float_path, check) >= min_agreement else float_path
+
+
+def cpu_ms_per_image(model: nn.Module, input_size: tuple[int, int], threads: int = 1,
+                     n_runs: int = 100) -> float:  # fmt: skip
+    """Median CPU ms per image at batch 1 after warm-up, with ``threads`` torch threads."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        return 1e3 * M.time_per_image(model, input_size, "cpu", n_warmup=20, n_runs=n_runs)
+    finally:
+        torch.set_num_threads(before)
+
+
+def gpu_ms_per_image(model: nn.Module, input_size: tuple[int, int]) -> float | None:
+    """Median GPU ms per image at batch 1 after warm-up, or None without CUDA."""
+    if not torch.cuda.is_available():
+        return None
+    return 1e3 * M.time_per_image(copy.deepcopy(model), input_size, "cuda")
+
+
+def plot_history(history: list[dict], path: str | Path, title: str = "",
+                 metric: str = "validation metric") -> Path:  # fmt: skip
+    """Loss curves (train, val) and the validation metric per epoch as a PNG (Figure API)."""
+    fig = Figure(figsize=(9, 3.5), layout="constrained")
+    ax_loss, ax_metric = fig.subplots(1, 2)
+    epochs = [h["epoch"] for h in history]
+    ax_loss.plot(epochs, [h["train_loss"] for h in history], "o-", label="train")
+    if any("val_loss" in h for h in history):
+        ax_loss.plot(epochs, [h.get("val_loss", math.nan) for h in history], "s-", label="val")
+        ax_metric.plot(epochs, [h.get("val_metric", math.nan) for h in history], "s-", c="C1")
+    ax_loss.set(xlabel="epoch", ylabel="loss", title="loss")
+    ax_loss.legend()
+    ax_metric.set(xlabel="epoch", ylabel="fraction", title=f"validation {metric}")
+    fig.suptitle(title)
+    fig.savefig(path, dpi=100)
+    return Path(path)
+
+
+def confusion_markdown(cm: torch.Tensor, names: tuple[str, ...]) -> str:
+    """A markdown table of a confusion matrix as % of each true class (rows true)."""
+    pct = M.percent_by_true_class(cm).numpy()
+    head = "| true \\ predicted | " + " | ".join(names) + " |"
+    rows = [f"| {n} | " + " | ".join(_pct(v) for v in row) + " |"
+            for n, row in zip(names, pct, strict=True)]
+    return "\n".join([head, "|" + "---|" * (len(names) + 1), *rows])
+
+
+def _pct(v: float | None) -> str:
+    return "–" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.2f}"
+
+
+def metrics_from_cm(cm: np.ndarray | torch.Tensor) -> dict[str, float]:
+    """The report's scores from a confusion matrix (fractions)."""
+    return scores(torch.as_tensor(np.asarray(cm)))
+
+
+# --- checkpoints on a test split, and the report -------------------------------------------
+
+#: The paper's Table 3 (hand / non-hand, % accuracy; ms per image). None: not known to us.
+PAPER_TABLE3 = {
+    "HandsNet": (97.81, 12.6),
+    "VGG16 + SVM": (None, None),
+    "VGG16 fine-tuned": (None, None),
+    "BoVW": (None, None),
+}
+#: The paper's Table 8 (segmentation, %: Acc, mAcc, mIoU, fwIoU; ms per image). None: unknown.
+PAPER_TABLE8 = {
+    "SegNet": (93.37, None, 89.17, None, 63.0),
+    "FCN": (None, None, None, None, None),
+}
+ARCH_LABEL = {"handsnet": "HandsNet", "vgg16": "VGG16 fine-tuned", "segnet": "SegNet",
+              "fcn16s": "FCN"}  # fmt: skip
+SEG_KEYS = ("pixel_accuracy", "mean_accuracy", "mean_iou", "fw_iou")
+
+
+def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
+                        hand_classes: tuple[str, ...] | None = None, threads: int = 1,
+                        time_runs: int = 100) -> dict:  # fmt: skip
+    """Test-split metrics (float and fast path) and CPU ms/image (1 thread by default) of a
+    checkpoint; a JSON-able dict (one row of the report)."""
+    from learn.checkpoint import load_checkpoint, model_from_checkpoint
+    from learn.folder import materialize, open_split
+
+    ckpt = load_checkpoint(ckpt_path)
+    model, run = model_from_checkpoint(ckpt)
+    hand = hand_classes or (ckpt.get("data") or {}).get("hand_classes")
+    test = materialize(open_split(Path(data_path), "test", run.task, run.model.input_size,
+                                  hand, run.train.seed), "test")  # fmt: skip
+    n_cls = run.model.num_classes
+    ref = evaluate_tensors(model, test, n_cls)
+    fast = fast_inference(model, check=test.x[:64])
+    res = evaluate_tensors(fast, test, n_cls)
+    if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
+        fast = fast_inference(model, bf16=False)
+        res = evaluate_tensors(fast, test, n_cls)
+    size = run.model.input_size
+    ms = {"eval_mode": cpu_ms_per_image(model, size, threads, time_runs),
+          "prepared": cpu_ms_per_image(prepare_for_inference(model), size, threads, time_runs),
+          "fast": cpu_ms_per_image(fast, size, threads, time_runs),
+          "gpu": gpu_ms_per_image(model, size)}  # fmt: skip
+    return {"checkpoint": str(ckpt_path), "arch": run.model.arch, "task": run.task,
+            "epoch": ckpt["epoch"], "class_names": list(ckpt.get("class_names", [])),
+            "n_test": len(test.y), "cm": ref.cm.tolist(), "metrics": ref.metrics,
+            "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
+            "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
+            "config": ckpt["config"], "train_versions": ckpt.get("versions")}  # fmt: skip
+
+
+def _fmt(v: float | None, scale: float = 1.0) -> str:
+    return "unknown" if v is None else f"{scale * v:.2f}"
+
+
+def _table3(rows: list[dict]) -> list[str]:
+    ours = {ARCH_LABEL.get(r["arch"], r["arch"]): r for r in rows if r["task"] == "classify"}
+    out = ["## Hand / non-hand classification (paper: Table 3)", "",
+           "| method | accuracy % (ours) | CPU ms/image (ours, fast path) | accuracy % (paper) "
+           "| ms/image (paper) |", "|---|---|---|---|---|"]  # fmt: skip
+    for name in dict.fromkeys([*PAPER_TABLE3, *ours]):
+        r, (p_acc, p_ms) = ours.get(name), PAPER_TABLE3.get(name, (None, None))
+        acc = "not run" if r is None else _fmt(r["metrics"]["accuracy"], 100)
+        ms = "not run" if r is None else _fmt(r["ms_per_image"]["fast"])
+        out.append(f"| {name} | {acc} | {ms} | {_fmt(p_acc)} | {_fmt(p_ms)} |")
+    return out
+
+
+def _table8(rows: list[dict]) -> list[str]:
+    ours = {ARCH_LABEL.get(r["arch"], r["arch"]): r for r in rows if r["task"] == "segment"}
+    out = ["## Hand-part segmentation (paper: Table 8)", "",
+           "| method | Acc % | mAcc % | mIoU % | fwIoU % | CPU ms/image (fast path) "
+           "| paper Acc % | paper mAcc % | paper mIoU % | paper fwIoU % | paper ms/image |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for name in dict.fromkeys([*PAPER_TABLE8, *ours]):
+        r, paper = ours.get(name), PAPER_TABLE8.get(name, (None,) * 5)
+        mine = ["not run"] * 5 if r is None else [
+            *(_fmt(r["metrics"][k], 100) for k in SEG_KEYS), _fmt(r["ms_per_image"]["fast"])]
+        out.append(f"| {name} | " + " | ".join([*mine, *map(_fmt, paper)]) + " |")
+    return out
+
+
+def _details(r: dict) -> list[str]:
+    ms = r["ms_per_image"]
+    names = tuple(r["class_names"]) or tuple(str(i) for i in range(len(r["cm"])))
+    return [f"### {ARCH_LABEL.get(r['arch'], r['arch'])} — `{r['checkpoint']}` "
+            f"(epoch {r['epoch']}, seed {r['seed']}, {r['n_test']} test images)", "",
+            f"CPU ms/image at batch 1, {r['threads']} thread(s): "
+            f"eval mode {_fmt(ms['eval_mode'])}, "
+            f"prepared (BN folded) {_fmt(ms['prepared'])}, fast path {_fmt(ms['fast'])} "
+            f"(bf16 {'on' if r['bf16'] else 'off'}); GPU "
+            f"{'none (no CUDA)' if ms['gpu'] is None else _fmt(ms['gpu'])}; input (h, w) = "
+            f"{tuple(r['config']['model']['input_size'])} px.", "",
+            "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
+            "", "Confusion matrix, % of each true class:", "",
+            confusion_markdown(torch.tensor(r["cm"]), names), ""]  # fmt: skip
+
+
+def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:
+    """The markdown report: our rows next to the paper's Tables 3 and 8 ("paper" columns;
+    "unknown" where we do not know the paper's value), then per-model details."""
+    lines = ["# handskin evaluation", "", header, "",
+             "Columns marked *paper* are Albini & Cannata (IJRR 2020); ours are on the test split "
+             "named above. Timing: median of 100 runs after 20 warm-up runs.", "",
+             *_table3(rows), "", *_table8(rows), "", "## Details", ""]  # fmt: skip
+    for r in rows:
+        lines += _details(r)
+    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return Path(path)

@@ -1,0 +1,128 @@
+"""The training loop: learning, subject-disjoint validation, checkpoints, resumption, fine-tuning
+lr factors, TOML run configs and cross-validation folds."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from learn.checkpoint import load_checkpoint, model_from_checkpoint
+from learn.config import FINETUNE_TEST_C
+from learn.crossval import cross_validate, folds, parse_grid
+from learn.data import TorchTactileDataset
+from learn.evaluate import evaluate_tensors
+from learn.folder import group_ids, validation_split
+from learn.train import (
+    RunConfig,
+    fit,
+    load_data,
+    load_run_config,
+    replace_train,
+    run_from_dict,
+)
+from tactile.config import to_dict
+from tactile.dataset import open_dataset
+from tactile.errors import ConfigError
+
+
+@pytest.fixture(autouse=True)
+def _one_thread():
+    torch.set_num_threads(1)
+
+
+def test_handsnet_learns_above_chance(tiny_dataset, tiny_run):
+    run = tiny_run("handsnet", epochs=6, batch_size=8)
+    data = load_data(tiny_dataset, run)
+    result = fit(run, data, None, progress=False)
+    acc = evaluate_tensors(result.model, data.test, 2).metrics["accuracy"]
+    assert acc > 0.6  # chance: 0.5 (8 hands, 8 non-hands in the test split)
+    assert result.history[-1]["train_loss"] < result.history[0]["train_loss"]
+
+
+def test_segnet_loss_decreases(tiny_dataset, tiny_run):
+    run = tiny_run("segnet", epochs=3)
+    result = fit(run, load_data(tiny_dataset, run), None, progress=False)
+    losses = [h["train_loss"] for h in result.history]
+    assert losses[-1] < losses[0] and 0.0 <= result.best_metric <= 1.0
+
+
+def test_validation_is_subject_disjoint(tiny_dataset):
+    ds = TorchTactileDataset(tiny_dataset, split="train", flips=False)
+    train, val = validation_split(ds, 0.3, seed=0)
+    (_, s_tr, i_tr), (c_va, s_va, i_va) = group_ids(train), group_ids(val)
+    assert set(s_tr[s_tr >= 0]).isdisjoint(s_va[s_va >= 0])
+    assert set(i_tr[i_tr >= 0]).isdisjoint(i_va[i_va >= 0])
+    assert set(c_va) == {0, 1} and set(train.indices).isdisjoint(val.indices)
+    assert set(np.r_[train.indices, val.indices]) == set(open_dataset(tiny_dataset).splits["train"])
+
+
+def test_checkpoint_round_trip_and_resume(tiny_dataset, tiny_run, tmp_path):
+    run = tiny_run("handsnet", epochs=2)
+    data = load_data(tiny_dataset, run)
+    full = fit(run, data, tmp_path / "full", progress=False)
+    fit(run, data, tmp_path / "cut", progress=False, stop_after_epoch=1)
+    resumed = fit(run, data, tmp_path / "cut", resume=True, progress=False)
+    for a, b in zip(full.history, resumed.history, strict=True):
+        assert a["train_loss"] == b["train_loss"] and a["val_metric"] == b["val_metric"]
+    last_full = load_checkpoint(tmp_path / "full" / "last.pt")
+    last_cut = load_checkpoint(tmp_path / "cut" / "last.pt")
+    for k, v in last_full["model"].items():
+        assert torch.equal(v, last_cut["model"][k]), k
+    ckpt = load_checkpoint(tmp_path / "full" / "best.pt")  # torch.load safe mode
+    assert {"model", "optimizer", "config", "epoch", "best_metric", "versions", "seed"} <= set(ckpt)
+    assert run_from_dict(ckpt["config"]) == run and ckpt["config"] == to_dict(run)
+    model, _ = model_from_checkpoint(ckpt)
+    x = data.test.x[:4]
+    with torch.no_grad():
+        assert torch.allclose(model(x), full.model.eval()(x))
+    assert (tmp_path / "full" / "curves.png").stat().st_size > 0
+
+
+def test_finetuning_applies_lr_factors(tiny_dataset, tiny_run, checkpoints):
+    run = replace_train(tiny_run("handsnet"), **{**vars(FINETUNE_TEST_C), "epochs": 61})
+    run = RunConfig(model=run.model, train=run.train, val_fraction=0.0, flips=False, threads=1)
+    seen: dict[int, list[tuple[float, float]]] = {}
+    first = {}
+
+    def on_epoch(epoch, opt):
+        seen[epoch] = [(g["lr_factor"], g["lr"]) for g in opt.param_groups]
+        if epoch == 0:
+            first["w"] = opt.param_groups[0]["params"][0].detach().clone()
+
+    fit(run, load_data(tiny_dataset, run), None, init_from=checkpoints["handsnet"],
+        progress=False, on_epoch=on_epoch)  # fmt: skip
+    want = {0: {0.1: 0.001, 1.0: 0.01}, 59: {0.1: 0.001, 1.0: 0.01}, 60: {0.1: 5e-4, 1.0: 5e-3}}
+    for epoch, lrs in want.items():
+        assert {f: pytest.approx(lr) for f, lr in seen[epoch]} == lrs
+    conv0 = load_checkpoint(checkpoints["handsnet"])["model"]["features.0.0.weight"]
+    assert torch.equal(first["w"], conv0)  # epoch 0 starts from the checkpoint's weights
+
+
+def test_run_config_toml(tmp_path):
+    path = tmp_path / "run.toml"
+    path.write_text('val_fraction = 0.2\n[model]\narch = "handsnet"\ninput_size = [32, 48]\n'
+                    '[train]\nlr = 0.05\nlr_factors = { first_two_convs = 0.1 }\n')  # fmt: skip
+    run = load_run_config(path)
+    assert run.val_fraction == 0.2 and run.model.input_size == (32, 48)
+    assert run.train.lr == 0.05 and dict(run.train.lr_factors) == {"first_two_convs": 0.1}
+    path.write_text("[train]\nlearning_rate = 0.1\n")
+    with pytest.raises(ConfigError, match="learning_rate"):
+        load_run_config(path)
+    with pytest.raises(ConfigError, match="unknown arch"):
+        run_from_dict({"model": {"arch": "resnet"}})
+
+
+def test_crossval_folds_are_group_disjoint(tiny_dataset, tiny_run):
+    assert parse_grid("train.lr=0.01,0.001; threads=1") == {"train.lr": [0.01, 0.001],
+                                                            "threads": [1]}  # fmt: skip
+    ds = TorchTactileDataset(tiny_dataset, split="train", flips=False)
+    _, subject, instance = group_ids(ds)
+    for train, val in folds(ds, 3, seed=0):
+        for ids in (subject, instance):
+            assert set(ids[train][ids[train] >= 0]).isdisjoint(ids[val][ids[val] >= 0])
+    cv = cross_validate(tiny_run(epochs=1), tiny_dataset, {"train.lr": [0.01, 0.001]}, k=2)
+    assert len(cv.rows) == 2 and len(cv.rows[0]["fold_metrics"]) == 2
+    assert cv.best_run.train.lr == cv.best_changes["train.lr"]
+    with pytest.raises(ConfigError, match="key=v1"):
+        parse_grid("train.lr")
