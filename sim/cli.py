@@ -156,7 +156,8 @@ def generate_command(
     hand_fraction: Annotated[float | None, typer.Option(
         help="Fraction of hand samples (unitless, 0..1). Default: 1710/3530.")] = None,
     seed: Annotated[int | None, typer.Option(
-        help="Dataset seed (integer >= 0); sample i depends only on (seed, i). Default: 0.")] = None,
+        help="Dataset seed (integer >= 0); sample i depends only on (seed, i). Default: 0.")
+    ] = None,
     workers: Annotated[int | None, typer.Option(
         help="Worker processes or Ray actors (count). Default: all cores. Never changes "
              "the bytes.")] = None,
@@ -179,7 +180,7 @@ def generate_command(
         help="Print the resolved configuration (TOML) and exit without generating.")] = False,
     quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
 ) -> None:
-    """Generate (or resume) a labelled synthetic tactile dataset; identical bytes for any --workers."""
+    """Generate (or resume) a labelled synthetic tactile dataset (same bytes for any --workers)."""
     from sim.gen_config import load_generate_config
     from sim.generate import generate, parse_shard
     from tactile.config import to_toml

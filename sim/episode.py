@@ -8,6 +8,12 @@ contactors) and returns its frames; `run_sample`
 wraps it with the stability checks and retries of docs/DESIGN.md and returns the sample dict of
 the dataset schema (`tactile.dataset.schema`) plus reject counts by reason.
 
+A sample does not depend on ``keep_sequence``: the frames up to the end of the hold are always
+simulated and the selected frame is chosen among them (`Frames.n_select`); a kept sequence only
+adds the release frames after them (same state, same per-frame noise), and a failure there ends
+the sequence early instead of rejecting the episode (tests/sim/test_episode.py checks that every
+non-sequence field is identical either way).
+
 Sensors are computed only at frame times: `mjDSBL_SENSOR` is set while stepping and cleared for
 one `mj_forward` per frame (tests/sim/test_episode.py checks that the readings equal those of a
 run with sensors always on).
@@ -55,8 +61,8 @@ class EpisodeConfig:
     active_pa: float = 500.0  # a taxel is active above this noise-free pressure (~3 noise sd), Pa
     max_attempts: int = 8  # episodes tried per sample before giving up
     cache_size: int = 16  # compiled press scenes kept per worker
-    skip_release: bool = True  # stop after hold unless the sequence is kept (the best frame
-    # is under load; release frames only shrink the contact)
+    skip_release: bool = True  # stop after hold unless the sequence is kept (the frame is
+    # selected among load and hold frames either way; release frames only shrink the contact)
 
 
 class EpisodeFailure(Exception):
@@ -75,7 +81,9 @@ class EpisodeContext:
         self.part = part or get_part(self.cfg.part)
         self.tmap = TactileMap.build(self.part.layout)
         rng = np.random.default_rng(np.random.SeedSequence(self.cfg.skin_seed, spawn_key=(2**31,)))
-        self.skin = SkinInstance.create(self.part.layout.positions_m, self.cfg.skin, rng)
+        self.skin = SkinInstance.create(
+            self.part.layout.positions_m, self.cfg.skin, rng, self.part.sensor_faces
+        )
         self.along = placement.link_axis(self.part)
         self._cache: OrderedDict[str, press.PressScene] = OrderedDict()
 
@@ -134,28 +142,51 @@ def run_episode(
     ctx: EpisodeContext, contactor: ContactorSpec, plan: PressPlan, rng: np.random.Generator,
     keep_release: bool = False,
 ) -> Frames:
-    """Simulate ``plan`` and read the skin every `FRAME_DT_S`; EpisodeFailure when unstable."""
+    """Simulate ``plan`` and read the skin every `FRAME_DT_S`; EpisodeFailure when unstable.
+
+    Frames up to the end of the hold are always simulated and checked; with ``keep_release`` (or
+    ``skip_release`` off) the release frames follow, and a failure among them only ends the
+    sequence there. The selection (`Frames.best`) is among the load and hold frames either way.
+    """
     scene = ctx.scene(contactor)
-    m, d = scene.model, scene.data
     _, pos, quat = site_pose(ctx, plan, rng)
     press.reset(scene, plan, pos, quat)
-    end = plan.total_s if keep_release or not ctx.cfg.skip_release else sum(plan.durations_s[:3])
-    n_frames = int(np.floor(end / FRAME_DT_S + 1e-9))
-    n_ctrl = max(1, round(CONTROL_DT_S / m.opt.timestep))
+    n_hold = _n_frames(sum(plan.durations_s[:3]))
+    release = keep_release or not ctx.cfg.skip_release
+    n_frames = _n_frames(plan.total_s) if release else n_hold
     per_frame = round(FRAME_DT_S / CONTROL_DT_S)
     sched = press.schedule(scene, plan, np.arange(n_frames * per_frame) * CONTROL_DT_S)
-    frames = []
+    frames: list[Frame] = []
     for k in range(n_frames):
-        m.opt.disableflags |= SENSOR_BIT
-        for j in range(per_frame):
-            press.apply_tick(scene, sched, k * per_frame + j)
-            mujoco.mj_step(m, d, nstep=n_ctrl)
-        m.opt.disableflags &= ~SENSOR_BIT
-        mujoco.mj_forward(m, d)
-        frame = read_frame(scene, ctx.skin, ctx.cfg.active_pa, (k + 1) * FRAME_DT_S)
-        _check(scene, frame.depth_m, contactor.max_penetration_m)
-        frames.append(frame)
-    return Frames(frames)
+        try:
+            frames.append(_step_frame(ctx, scene, sched, k, contactor.max_penetration_m))
+        except EpisodeFailure:
+            if k < n_hold:
+                raise
+            break
+    return Frames(frames, n_hold)
+
+
+def _n_frames(duration_s: float) -> int:
+    return int(np.floor(duration_s / FRAME_DT_S + 1e-9))
+
+
+def _step_frame(
+    ctx: EpisodeContext, scene: press.PressScene, sched: press.Schedule, k: int, max_pen_m: float
+) -> Frame:
+    """Simulate frame ``k`` (its control ticks), read and check it."""
+    m, d = scene.model, scene.data
+    n_ctrl = max(1, round(CONTROL_DT_S / m.opt.timestep))
+    per_frame = round(FRAME_DT_S / CONTROL_DT_S)
+    m.opt.disableflags |= SENSOR_BIT
+    for j in range(per_frame):
+        press.apply_tick(scene, sched, k * per_frame + j)
+        mujoco.mj_step(m, d, nstep=n_ctrl)
+    m.opt.disableflags &= ~SENSOR_BIT
+    mujoco.mj_forward(m, d)
+    frame = read_frame(scene, ctx.skin, ctx.cfg.active_pa, (k + 1) * FRAME_DT_S)
+    _check(scene, frame.depth_m, max_pen_m)
+    return frame
 
 
 def episode_rng(seed: int, index: int, attempt: int) -> tuple[np.random.Generator, int]:
@@ -198,6 +229,12 @@ def run_sample(
     )
 
 
+def reading(ctx: EpisodeContext, frame: Frame, ep_seed: int) -> np.ndarray:
+    """Noisy 16-bit reading (N,) uint16 of ``frame`` (pressure scaled to its sensed force)."""
+    rng = frame_rng(ep_seed, frame)
+    return ctx.skin.frame(frame.depth_m, rng, frame.time_s, frame.sensed_force_n).reading
+
+
 def make_sample(
     ctx: EpisodeContext, contactor: ContactorSpec, plan: PressPlan, frames: Frames,
     ep_seed: int, keep_sequence: bool,
@@ -205,7 +242,7 @@ def make_sample(
     """The dataset sample dict (`tactile.dataset.schema`) of the best frame of ``frames``."""
     best = frames.best
     frames_used = frames.frames if keep_sequence else [best]
-    seq = [ctx.skin.frame(f.depth_m, frame_rng(ep_seed, f), f.time_s).reading for f in frames_used]
+    seq = [reading(ctx, f, ep_seed) for f in frames_used]
     raw = seq[frames.best_index] if keep_sequence else seq[0]
     sensed = sensed_pressure(ctx.skin, raw, best.time_s)
     label, who = label_taxels(ctx.skin, best, ctx.cfg.active_pa)

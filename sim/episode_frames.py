@@ -2,6 +2,11 @@
 
 Functions on a compiled `sim.press.PressScene` after `mj_forward`, and pure functions on arrays
 for the per-taxel labels (who pressed each active taxel, through the skin's spread kernel).
+
+Pressure is force-consistent (`sim.skin`): the foundation field of the depths is scaled so that
+its resultant equals the *sensed* normal force — the solver's force of the contacts between the
+contactor and the link whose contact point lies within `SENSED_RADIUS_SPACINGS` taxel spacings of
+a pressed taxel (contacts on bare link are not felt).
 """
 
 from __future__ import annotations
@@ -17,6 +22,10 @@ from tactile.labels import label_image
 from tactile.tactile_map import TactileMap
 
 NOISE_SIGMAS = 3.0  # readings less than this many noise sd above the baseline are read as 0
+# A contact is felt when its point lies within this many taxel spacings (`SkinInstance.spacing_m`,
+# the pad pitch) of a pressed taxel: about one, plus the half pitch by which a flat face's rim
+# contacts can lie beyond the last pressed taxel (a 25 mm punch on the plate: 1.0 pitch).
+SENSED_RADIUS_SPACINGS = 1.5
 
 
 @dataclass(frozen=True)
@@ -27,7 +36,8 @@ class Frame:
     geom : (N,) int64 index into the scene's readout geoms of the deepest one, -1 none.
     geom_label : (N,) int64 class of that geom (0 where none or non-hand).
     active : taxels with pressure_pa above the active threshold. force_n : total normal force
-    between contactor and link, N. time_s : time in the episode, s.
+    between contactor and link, N. sensed_force_n : the part of it on the sensorized region
+    (the resultant of ``pressure_pa``), N. time_s : time in the episode, s.
     """
 
     time_s: float
@@ -37,17 +47,22 @@ class Frame:
     geom_label: np.ndarray
     active: int
     force_n: float
+    sensed_force_n: float = 0.0
 
 
 @dataclass(frozen=True)
 class Frames:
-    """The 10 Hz frames of one episode and the selected one (most active taxels, first of ties)."""
+    """The 10 Hz frames of one episode and the selected one: most active taxels (first of ties)
+    among the first ``n_select`` frames (load and hold; None: all), so frames simulated only for
+    a kept sequence (release) never change the selection."""
 
     frames: list[Frame]
+    n_select: int | None = None
 
     @property
     def best_index(self) -> int:
-        return int(np.argmax([f.active for f in self.frames])) if self.frames else -1
+        eligible = self.frames[: self.n_select]
+        return int(np.argmax([f.active for f in eligible])) if eligible else -1
 
     @property
     def best(self) -> Frame:
@@ -58,27 +73,58 @@ class Frames:
         return self.best.active if self.frames else 0
 
 
+def link_contacts(model: mujoco.MjModel, data: mujoco.MjData, link_body: int) -> np.ndarray:
+    """(C,) int64 indices of the contacts between the weld body ``link_body`` and anything else."""
+    pairs = np.asarray(data.contact.geom[: data.ncon]).reshape(-1, 2)
+    on_link = model.body_weldid[model.geom_bodyid[pairs]] == link_body
+    return np.flatnonzero(on_link[:, 0] != on_link[:, 1])
+
+
+def contact_forces_n(
+    model: mujoco.MjModel, data: mujoco.MjData, link_body: int, pressed_m: np.ndarray,
+    radius_m: float,
+) -> tuple[float, float]:
+    """(total, sensed) normal force (N) of the contacts on the link: all of them, and those whose
+    point lies within ``radius_m`` (m) of a pressed taxel (world positions (K, 3), m)."""
+    idx = link_contacts(model, data, link_body)
+    normal = _normal_forces_n(model, data, idx)
+    if not idx.size or not len(pressed_m):
+        return float(normal.sum()), 0.0
+    points = np.asarray(data.contact.pos[: data.ncon])[idx]
+    gap2 = np.min(np.sum((points[:, None, :] - pressed_m[None]) ** 2, axis=2), axis=1)
+    return float(normal.sum()), float(normal[gap2 <= radius_m**2].sum())
+
+
+def _normal_forces_n(model: mujoco.MjModel, data: mujoco.MjData, idx: np.ndarray) -> np.ndarray:
+    """(C,) normal forces (N) of contacts ``idx``: the first constraint row of each contact with
+    elliptic cones (as `mujoco.mj_contactForce` reads it), `mj_contactForce` otherwise."""
+    adr = np.asarray(data.contact.efc_address[: data.ncon])[idx]
+    if model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC:
+        return np.where(adr >= 0, data.efc_force[np.maximum(adr, 0)], 0.0)
+    force, normal = np.zeros(6), np.zeros(idx.size)
+    for j, i in enumerate(idx):
+        mujoco.mj_contactForce(model, data, int(i), force)
+        normal[j] = force[0]
+    return normal
+
+
 def contact_force_n(scene: PressScene) -> float:
     """Sum of the normal forces (N) of the contacts between the link and anything else."""
     m, d = scene.model, scene.data
-    link = scene.readout.link_body
-    force, total = np.zeros(6), 0.0
-    for i in range(d.ncon):
-        g1, g2 = d.contact.geom[i]
-        if (m.body_weldid[m.geom_bodyid[g1]] == link) != (m.body_weldid[m.geom_bodyid[g2]] == link):
-            mujoco.mj_contactForce(m, d, i, force)
-            total += force[0]
-    return float(total)
+    return contact_forces_n(m, d, scene.readout.link_body, np.zeros((0, 3)), 0.0)[0]
 
 
 def read_frame(scene: PressScene, skin: SkinInstance, active_pa: float, time_s: float) -> Frame:
     """The frame of the current state (call after `mj_forward` with sensors enabled)."""
-    out = scene.readout.read(scene.model, scene.data)
-    pressure = skin.pressure(out.depth_m)
+    m, d = scene.model, scene.data
+    out = scene.readout.read(m, d)
+    pressed = scene.readout.positions_m(d, np.flatnonzero(out.depth_m > 0))
+    radius = SENSED_RADIUS_SPACINGS * skin.spacing_m
+    total, sensed = contact_forces_n(m, d, scene.readout.link_body, pressed, radius)
+    pressure = skin.pressure(out.depth_m, sensed)
     label = np.where(out.contactor >= 0, scene.geom_label[out.contactor], 0)
     active = int(np.count_nonzero(pressure > active_pa))
-    return Frame(time_s, out.depth_m, pressure, out.contactor, label, active,
-                 contact_force_n(scene))
+    return Frame(time_s, out.depth_m, pressure, out.contactor, label, active, total, sensed)
 
 
 def sensed_pressure(skin: SkinInstance, reading: np.ndarray, time_s: float) -> np.ndarray:

@@ -22,16 +22,25 @@ arch (ring + little metacarpals about an axis between middle and ring metacarpal
 4th and 5th CMC joints flex about 10-15 and 20-30 degrees (Kapandji, The Physiology of the
 Joints, vol. 1; El-Shennawy et al., J Hand Surg 2001).
 
-Soft tissue. Every collision geom has ``solimp = (0, 0.99, tissue_depth_m, 0.5, 2)``,
-``solref = (0.01, 1)`` and ``priority = 1`` (so these parameters, not the other geom's, govern
-hand contacts): the impedance rises from 0 at first touch to 0.99 at ``tissue_depth_m``, so the
-force-depth law stiffens like fingertip pulp (Serina et al., J Biomech 1997) and the depth stays
-below the tissue allowance. Measured on MuJoCo's tactile plate (tests/sim/test_hand.py, default
-3.5 mm allowance, index fingertip radius 0.102 x breadth): 2 / 5 / 10 N -> 2.2 / 2.5 / 2.7 mm
-depth -> patch 10.0-12.5 / 10.5-13.5 / 11-13.5 mm wide for 15-22 cm hands, matching the chord
-2 sqrt(2 r d) of a capsule end of radius r at depth d. (A palm allowance twice the fingertip's
-was tried on the forearm: median active taxels per hand contact 17 -> 25, but the palm's share of
-hand pixels 0.47 -> 0.60 against the paper's 0.40; not kept.)
+Soft tissue. Every collision geom has ``solimp = (0, 0.99, w, 0.5, 2)``, ``solref = (0.01, 1)``
+and ``priority = 1`` (so these parameters, not the other geom's, govern hand contacts): the
+impedance rises from 0 at first touch to 0.99 at the allowance ``w``, so the force-depth law
+stiffens like fingertip pulp (Serina et al., J Biomech 1997) and the depth stays below ``w``.
+``w`` is per segment, `TISSUE_RATIO` x ``tissue_depth_m``: the rigid primitives stand for bone
+plus soft tissue that flattens on a surface, and a deeper allowance lets them overlap the link as
+far as the real tissue would spread. Anatomy (approximate, rounded): fingertip pulp 3-5 mm from
+the distal phalanx to the skin and a contact patch of 1.5-2.5 cm^2 (about 14-18 mm across) at
+1-5 N (Serina et al. 1997; Pawluk & Howe, J Biomech Eng 1999); the palm's fat pad, palmar
+aponeurosis and intrinsic muscles put roughly 8-15 mm of soft tissue under the metacarpals and
+more under the thenar/hypothenar eminences; the phalanx pads carry a fibro-fatty pad a few
+millimetres thick. Since the solver's depth is only a fraction of ``w`` at moderate forces
+(measured on the forearm: fingertips 2-4 mm, palm 3-6 mm at 10-40 N), the allowances are set at
+about twice the anatomical thickness of each region, and the palm's above the fingertip's. Measured
+(320 forearm samples, seed 2020, forces of `sim.interactions`): median active taxels per hand
+contact 16 with one 3.5 mm allowance everywhere, 23 with the palm at 2.5x, 43 with
+`TISSUE_RATIO`; the palm's share of hand pixels stays 0.51 (paper ~0.40). On MuJoCo's tactile
+plate an index fingertip pressed with 2-5 N now sinks 4-6 mm and touches 12-20 mm across (the
+chord of its capsule end; tests/sim/test_hand.py), as fingerpads do (before: 10-13.5 mm).
 
 Labels. Collision geoms are named ``<prefix><part>_<segment>`` with part in `HAND_PARTS`
 (the thenar eminence on the first metacarpal is "palm"); `geom_parts` / `geom_part_ids` recover
@@ -77,6 +86,10 @@ PART_RGBA = {  # after the palette of Albini & Cannata 2020, Fig. 10
     "middle": (0.40, 0.75, 0.30, 1.0), "ring": (0.25, 0.55, 0.90, 1.0),
     "pinkie": (0.60, 0.35, 0.80, 1.0), "palm": (0.90, 0.75, 0.65, 1.0),
 }
+# Soft-tissue allowance (solimp width) per segment, as a multiple of the subject's softness scale
+# `HandConfig.tissue_depth_m` (3.5 mm mean): palm 10.5 mm, phalanx pads 10.5 mm, fingertip pulp
+# 8.75 mm at the mean (module docstring, "Soft tissue"; measured effect in test_hand_statistics).
+TISSUE_RATIO = {"palm": 3.0, "proximal": 3.0, "middle": 3.0, "distal": 2.5}
 _PART_RE = re.compile(r"(?:^|_)[rl]h_(thumb|index|middle|ring|pinkie|palm)_")
 
 
@@ -237,11 +250,19 @@ class _Builder:
         fromto = np.concatenate([mirror_pos(start, self.cfg.side), mirror_pos(end, self.cfg.side)])
         name = f"{self.p}{part}_{segment}"
         kind = mujoco.mjtGeom.mjGEOM_CAPSULE
-        body.add_geom(self.collision, name=name, type=kind, fromto=fromto, size=[radius, 0, 0])
+        geom = body.add_geom(
+            self.collision, name=name, type=kind, fromto=fromto, size=[radius, 0, 0]
+        )
+        self._tissue(geom, "palm" if part == "palm" else segment)
         body.add_geom(
             self.visual, name=f"{name}_visual", type=kind, fromto=fromto, size=[radius, 0, 0],
             rgba=PART_RGBA[part],
         )
+
+    def _tissue(self, geom: mujoco.MjsGeom, segment: str) -> None:
+        """Set the geom's tissue allowance: `TISSUE_RATIO` of the segment x the fingertip's."""
+        width = TISSUE_RATIO.get(segment, 1.0) * self.cfg.tissue_depth_m
+        geom.solimp = [0.0, 0.99, width, 0.5, 2.0]
 
     def _palm_geoms(self, body, fingers: tuple[str, str], heel: tuple[float, float]) -> None:
         """Metacarpal capsules of two fingers and a transverse heel capsule (y / breadth)."""
@@ -263,7 +284,8 @@ class _Builder:
         pos = mirror_pos(((x0 + x1) / 2, y_out / 2, -r / 2), self.cfg.side)
         size = [(x1 - x0) / 2, abs(y_out) / 2, r / 2]
         kind, name = mujoco.mjtGeom.mjGEOM_BOX, f"{self.p}palm_{half}_pad"
-        body.add_geom(self.collision, name=name, type=kind, pos=pos, size=size)
+        pad = body.add_geom(self.collision, name=name, type=kind, pos=pos, size=size)
+        self._tissue(pad, "palm")
         body.add_geom(
             self.visual, name=f"{name}_visual", type=kind, pos=pos, size=size,
             rgba=PART_RGBA["palm"],

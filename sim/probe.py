@@ -8,7 +8,9 @@ tuned so that it settles at the depth an elastic (Winkler) foundation of modulus
 - flat cylinder of radius r (axis along the normal): F = k π r² δ
 - box with half extents (hx, hy, hz), face down: F = 4 k hx hy δ
 
-so force, depth and the skin model's pressures agree (sum of p·area ≈ F). In MuJoCo's direct
+so force, depth and the foundation pressures agree (sum of p·area ≈ F); the skin model then scales
+them to the sensed force exactly (`sim.skin`, force-consistent pressure: `ProbeRig.press` passes
+the solver's force on the sensorized region). In MuJoCo's direct
 solref format with constant impedance d, a single contact rests at r = (1 - d) F / (m s); the
 stiffness s starts from that and is corrected by the measured depth (flat faces make 4 contacts).
 """
@@ -19,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.episode_frames import SENSED_RADIUS_SPACINGS, contact_forces_n
 from sim.parts import Part
 from sim.scene import Contactor, SkinScene
 from sim.skin import SkinConfig, SkinInstance
@@ -113,6 +116,13 @@ class ProbeRig:
         self.scene.step(round(SETTLE_S / self.scene.model.opt.timestep))
         return self.scene.contactor_depth_m("probe") - self.clearance_m
 
+    def sensed_force_n(self, depth_m: np.ndarray) -> float:
+        """Normal force (N) of the probe's contacts near the pressed taxels (depth (N,) m > 0)."""
+        m, d, readout = self.scene.model, self.scene.data, self.scene.readout
+        pressed = readout.positions_m(d, np.flatnonzero(depth_m > 0))
+        radius = SENSED_RADIUS_SPACINGS * self.skin.spacing_m
+        return contact_forces_n(m, d, readout.link_body, pressed, radius)[1]
+
     def press(
         self,
         force_n: float,
@@ -135,7 +145,7 @@ class ProbeRig:
                 break
             stiffness *= float(np.clip(max(depth, 1e-9) / target, 0.1, 10.0)) ** 0.8
         frame = self.scene.read()
-        skin = self.skin.frame(frame.depth_m, rng)
+        skin = self.skin.frame(frame.depth_m, rng, force_n=self.sensed_force_n(frame.depth_m))
         return PressResult(
             force_n,
             target,
@@ -162,7 +172,9 @@ def calibration_curve(
     contact_radius_m and expected_active (taxels within that radius: the closed-form reference).
     """
     cfg = cfg or SkinConfig()
-    skin = SkinInstance.create(part.layout.positions_m, cfg, np.random.default_rng(seed))
+    skin = SkinInstance.create(
+        part.layout.positions_m, cfg, np.random.default_rng(seed), part.sensor_faces
+    )
     rig = ProbeRig(part, probe, taxel, skin)
     rows = [rig.press(float(f)) for f in forces_n]
     depth = np.array([r.depth_m for r in rows])

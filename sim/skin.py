@@ -4,10 +4,18 @@ Pure functions on arrays plus a frozen `SkinConfig` (units and the reason for ea
 `SkinInstance` holding the per-taxel draws (gain, baseline, drift) of one physical skin. The
 noise-free ground truth (`SkinFrame.pressure_pa`) is kept beside the noisy reading.
 
-Chain, per frame: depth d (m) -> elastic foundation p = k · d_ref · (d / d_ref)^n (Pa) -> spread
-through the dielectric/fabric layer (Gaussian kernel over taxel distance, rows normalised so that
-a uniform pressure stays uniform) -> counts = baseline + drift · t + gain · counts_per_pa · p +
-noise -> round, clip to [0, 65535].
+Chain, per frame: depth d (m) -> elastic foundation p = k · d_ref · (d / d_ref)^n (Pa) ->
+force-consistent scaling (below) -> spread through the dielectric/fabric layer (Gaussian kernel
+over taxel distance, rows normalised so that a uniform pressure stays uniform) -> counts =
+baseline + drift · t + gain · counts_per_pa · p + noise -> round, clip to [0, 65535].
+
+Force consistency. The simulator's penetration depth is the *combined* compliance of the skin and
+the contactor (a hand's tissue sinks up to several mm), so k · d with the skin's own modulus
+overstates the pressure (~500 kPa peaks for an 18.7 N hand press; real touches are tens of kPa).
+With ``SkinConfig.force_consistent`` and a frame's sensed normal force F (the solver's force on
+the sensorized region), the foundation field keeps its shape but is scaled so that
+Σ p_i A_i = F over the pressed taxels, A_i = `taxel_areas_m2` (one third of the incident sensor
+triangles' areas). Without a force (or with the flag off) the pure elastic foundation is used.
 """
 
 from __future__ import annotations
@@ -55,6 +63,9 @@ class SkinConfig:
     # Std of the white read noise per frame (counts): ≈ 0.15 % of full scale, ~0.4 LSB of the
     # 8-bit values the iCub skin driver reports (assumed).
     noise_std_counts: float = 100.0
+    # Scale each frame's foundation field so that sum(p · taxel area) equals the solver's normal
+    # force on the sensorized region (module docstring); False: pure elastic foundation p = k · d.
+    force_consistent: bool = True
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -83,6 +94,43 @@ def depth_to_pressure(depth_m: np.ndarray, cfg: SkinConfig) -> np.ndarray:
         return cfg.stiffness_pa_per_m * d
     ref = cfg.reference_depth_m
     return cfg.stiffness_pa_per_m * ref * (d / ref) ** cfg.exponent
+
+
+def force_consistent_pressure(
+    base_pa: np.ndarray, area_m2: np.ndarray, force_n: float
+) -> np.ndarray:
+    """Scale a pressure field so that its resultant equals a measured normal force.
+
+    base_pa : (N,) float, Pa, >= 0 (the foundation field; its shape is kept). area_m2 : (N,)
+    float, m², taxel areas. force_n : normal force on the pressed taxels, N. Returns (N,) float,
+    Pa with sum(p · area) = force_n; all zeros when nothing is pressed or the force is <= 0.
+    """
+    base = np.asarray(base_pa, dtype=np.float64)
+    resultant = float(base @ area_m2)
+    if resultant <= 0.0 or force_n <= 0.0:
+        return np.zeros_like(base)
+    return base * (force_n / resultant)
+
+
+def lattice_spacing_m(positions_m: np.ndarray) -> float:
+    """Median distance (m) from each taxel (N, 3) m to its nearest neighbour."""
+    dist, _ = cKDTree(positions_m).query(positions_m, k=2)
+    return float(np.median(dist[:, 1]))
+
+
+def taxel_areas_m2(positions_m: np.ndarray, faces: np.ndarray | None = None) -> np.ndarray:
+    """Area (N,) m² each taxel stands for on the sensor mesh.
+
+    positions_m : (N, 3) float, m. faces : (M, 3) int taxel triangles, or None. With faces, one
+    third of the areas of the triangles incident on each taxel (they sum to the mesh's area);
+    without, the hexagonal cell of the lattice, spacing² · √3 / 2 (`lattice_spacing_m`).
+    """
+    n = positions_m.shape[0]
+    if faces is None or len(faces) == 0:
+        return np.full(n, lattice_spacing_m(positions_m) ** 2 * np.sqrt(3.0) / 2.0)
+    tri = positions_m[np.asarray(faces)]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    return np.bincount(np.asarray(faces).ravel(), np.repeat(area / 3.0, 3), minlength=n)
 
 
 def spread_matrix(
@@ -132,6 +180,9 @@ class SkinInstance:
 
     gain : (N,) float, relative (mean 1). baseline_counts, drift_counts_per_s : (N,) float.
     dead : (N,) bool — taxels that read only their baseline (faults from `tactile.faults`).
+    area_m2 : (N,) float, m² — taxel areas (`taxel_areas_m2`); spacing_m : float, m — the pitch
+    of a hexagonal lattice with the median taxel area (the pad pitch, e.g. 10.6 mm on the
+    forearm; nearest-neighbour distances are shorter where an iCub module's pads crowd).
     """
 
     cfg: SkinConfig
@@ -140,18 +191,24 @@ class SkinInstance:
     baseline_counts: np.ndarray
     drift_counts_per_s: np.ndarray
     dead: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    area_m2: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    spacing_m: float = 0.0
 
     @classmethod
     def create(
-        cls, positions_m: np.ndarray, cfg: SkinConfig, rng: np.random.Generator
+        cls, positions_m: np.ndarray, cfg: SkinConfig, rng: np.random.Generator,
+        faces: np.ndarray | None = None,
     ) -> SkinInstance:
-        """Draw the per-taxel gain, baseline and drift rate for taxels at positions_m (N, 3), m."""
+        """Draw the per-taxel gain, baseline and drift rate for taxels at positions_m (N, 3), m;
+        ``faces`` (M, 3) int: the sensor mesh, for the taxel areas (None: lattice cells)."""
         n = positions_m.shape[0]
         gain = np.maximum(rng.normal(1.0, cfg.gain_spread, n), 0.05)
         base = rng.normal(cfg.baseline_counts, cfg.baseline_spread_counts, n)
         drift = rng.normal(0.0, cfg.drift_std_counts_per_s, n)
         spread = spread_matrix(positions_m, cfg.spread_sigma_m, cfg.spread_cutoff_sigmas)
-        return cls(cfg, spread, gain, base, drift, np.zeros(n, dtype=bool))
+        area = taxel_areas_m2(positions_m, faces)
+        spacing = float(np.sqrt(2.0 * np.median(area) / np.sqrt(3.0)))  # hex pitch of that cell
+        return cls(cfg, spread, gain, base, drift, np.zeros(n, dtype=bool), area, spacing)
 
     def with_dead_modules(
         self, module_ids: np.ndarray, n: int, rng: np.random.Generator
@@ -163,21 +220,27 @@ class SkinInstance:
     def n_taxels(self) -> int:
         return int(self.gain.shape[0])
 
-    def pressure(self, depth_m: np.ndarray) -> np.ndarray:
-        """Noise-free sensed pressure (N,) Pa from depth (N,) m: foundation law, then spread."""
-        return self.spread @ depth_to_pressure(depth_m, self.cfg)
+    def pressure(self, depth_m: np.ndarray, force_n: float | None = None) -> np.ndarray:
+        """Noise-free sensed pressure (N,) Pa from depth (N,) m: foundation law, scaled to the
+        sensed normal force ``force_n`` (N; when given and ``cfg.force_consistent``), spread."""
+        base = depth_to_pressure(depth_m, self.cfg)
+        if force_n is not None and self.cfg.force_consistent:
+            base = force_consistent_pressure(base, self.area_m2, force_n)
+        return self.spread @ base
 
     def offset(self, time_s: float) -> np.ndarray:
         """Untouched reading (N,) counts at time_s: baseline plus linear drift."""
         return self.baseline_counts + self.drift_counts_per_s * time_s
 
     def frame(
-        self, depth_m: np.ndarray, rng: np.random.Generator | None, time_s: float = 0.0
+        self, depth_m: np.ndarray, rng: np.random.Generator | None, time_s: float = 0.0,
+        force_n: float | None = None,
     ) -> SkinFrame:
-        """Depth (N,) m -> `SkinFrame`. rng=None gives the noise-free reading."""
+        """Depth (N,) m -> `SkinFrame`. rng=None gives the noise-free reading; ``force_n``: the
+        sensed normal force (N) the pressure is scaled to (`pressure`)."""
         if np.shape(depth_m) != (self.n_taxels,):
             raise ConfigError(f"depth has shape {np.shape(depth_m)}; expected ({self.n_taxels},)")
-        pressure = self.pressure(depth_m)
+        pressure = self.pressure(depth_m, force_n)
         offset = self.offset(time_s)
         gain = np.where(self.dead, 0.0, self.gain) if self.dead.size else self.gain
         counts = offset + gain * self.cfg.counts_per_pa * pressure

@@ -58,7 +58,13 @@ def check_labels(labels: np.ndarray, n_taxels: int, n_classes: int = N_CLASSES) 
 
 
 def label_image(
-    tmap: TactileMap, p: np.ndarray, labels: np.ndarray, *, erode_px: int = 2, dilate_px: int = 4
+    tmap: TactileMap,
+    p: np.ndarray,
+    labels: np.ndarray,
+    *,
+    erode_px: int = 2,
+    dilate_px: int = 4,
+    image: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per-pixel class, consistent with ``tmap.image(p)``.
 
@@ -71,16 +77,24 @@ def label_image(
     ----------
     tmap : TactileMap. p : (N,) float pressures (>= 0). labels : (N,) int, 0..6.
     erode_px, dilate_px : int, pixels — the image's morphology.
+    image : (H, W) uint8, optional — ``tmap.image(p, erode_px=..., dilate_px=...)`` when the
+        caller already has it (it is not recomputed; passing another image is the caller's bug).
 
     Returns
     -------
-    classes : (H, W) uint8, 0..6.
+    classes : (H, W) uint8, 0..6 (all 0 without a labelled taxel; the image is then not needed).
     """
     lab = check_labels(labels, tmap.n_taxels)
     p = np.asarray(p)
     if p.ndim != 1:
         raise MapError(f"label_image takes one frame p of shape ({tmap.n_taxels},), got {p.shape}")
-    foreground = tmap.image(p, erode_px=erode_px, dilate_px=dilate_px) > 0
+    if image is not None and np.shape(image) != tmap.shape:
+        raise MapError(f"image must have the map's shape {tmap.shape}, got {np.shape(image)}")
+    if not lab.any():
+        return np.zeros(tmap.shape, dtype=np.uint8)
+    if image is None:
+        image = tmap.image(p, erode_px=erode_px, dilate_px=dilate_px)
+    foreground = np.asarray(image) > 0
     fields = np.where(lab[None, :] == np.arange(N_CLASSES)[:, None], p[None, :], 0.0)
     spread = morphology.dilate(np.ascontiguousarray(tmap.interpolate(fields)), dilate_px)
     return np.where(foreground, spread.argmax(axis=0), 0).astype(np.uint8)

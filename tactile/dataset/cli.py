@@ -1,13 +1,18 @@
-"""`handskin export` and `handskin ingest`: PNG folders from a dataset, datasets from recordings."""
+"""`handskin export`, `ingest`, `sheet`: PNG folders and contact sheets of a dataset, datasets
+from recordings."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
-from tactile.errors import HandskinError
+from tactile.errors import DataError, HandskinError
+
+CLASSES = ("hand", "non_hand")
 
 
 def _fail(err: Exception) -> None:
@@ -87,7 +92,83 @@ def ingest_command(
     typer.echo(f"dataset written to {path}")
 
 
+def select_samples(
+    ds, cls: str | None = None, action: str | None = None, subject: int | None = None, n: int = 24
+) -> np.ndarray:
+    """(K,) int64 indices, K <= n, spread evenly over the samples matching every filter.
+
+    ds : an open dataset. cls : "hand" or "non_hand". action : a name of attr ``actions``.
+    subject : a subject id (int). DataError names an unknown value or an empty selection.
+    """
+    keep = np.ones(len(ds), dtype=bool)
+    if cls is not None:
+        if cls not in CLASSES:
+            raise DataError(f"--class {cls!r}: choose one of {', '.join(CLASSES)}")
+        keep &= (ds["is_hand"][()] == 1) == (cls == "hand")
+    if action is not None:
+        names = list(ds.attrs.get("actions", []))
+        if action not in names:
+            raise DataError(f"--action {action!r} unknown; actions: {', '.join(names) or 'none'}")
+        keep &= ds["action"][()] == names.index(action)
+    if subject is not None:
+        keep &= ds["subject_id"][()] == subject
+    found = np.flatnonzero(keep)
+    if not len(found):
+        raise DataError("no sample matches --class/--action/--subject; relax the filters")
+    pick = np.unique(np.linspace(0, len(found) - 1, min(n, len(found))).round().astype(int))
+    return found[pick]
+
+
+def _caption(ds, i: int) -> str:
+    if "is_hand" in ds.fields and ds["is_hand"][i]:
+        names = list(ds.attrs.get("actions", []))
+        a = int(ds["action"][i]) if "action" in ds.fields else -1
+        return f"#{i} s{int(ds['subject_id'][i])} {names[a] if 0 <= a < len(names) else ''}"
+    desc = json.loads(ds.sample_field("contactor", i)) if "contactor" in ds.fields else {}
+    return f"#{i} {desc.get('name', 'non-hand')} {desc.get('press', '')}".strip()
+
+
+def write_sheet(dataset_dir: Path, png: Path, n: int = 24, **filters) -> Path:
+    """Contact sheet (PNG) of up to ``n`` samples of a dataset, label colours over the images."""
+    from tactile.dataset import open_dataset
+    from tactile.sheet import save_contact_sheet
+
+    with open_dataset(dataset_dir) as ds:
+        idx = select_samples(ds, n=n, **filters)
+        images = np.stack([ds["image"][i] for i in idx])
+        labels = np.stack([ds["label_image"][i] for i in idx]) if "label_image" in ds.fields \
+            else None
+        title = f"{ds.attrs.get('part', '')}: {len(idx)} of {len(ds)} samples"
+        return save_contact_sheet(png, images, labels=labels, n_cols=6, title=title,
+                                  titles=[_caption(ds, int(i)) for i in idx])
+
+
+def sheet_command(
+    dataset_dir: Annotated[
+        Path, typer.Argument(help="Dataset folder (holding dataset.h5) or the dataset.h5 file.")
+    ],
+    png: Annotated[Path, typer.Option(help="Output PNG file (100 dpi; one tile per sample).")],
+    cls: Annotated[str | None, typer.Option(
+        "--class", help="Only hand or non_hand samples (class name).")] = None,
+    action: Annotated[str | None, typer.Option(
+        help="Only this action (name, e.g. grasp, push_left; see attr `actions`).")] = None,
+    subject: Annotated[int | None, typer.Option(
+        help="Only this subject (integer id, e.g. 7 for s0007).")] = None,
+    n: Annotated[int, typer.Option("--n", help="Number of tiles (count), spread evenly over "
+                                               "the matching samples.")] = 24,
+) -> None:
+    """Contact sheet of a dataset: tactile images with label colours and the class legend."""
+    try:
+        if n < 1:
+            raise DataError(f"--n {n} is out of range; allowed >= 1")
+        path = write_sheet(dataset_dir, png, n, cls=cls, action=action, subject=subject)
+    except HandskinError as err:
+        _fail(err)
+    typer.echo(f"contact sheet: {path}")
+
+
 def register(app: typer.Typer) -> None:
-    """Add `export` and `ingest` to the `handskin` app."""
+    """Add `export`, `ingest` and `sheet` to the `handskin` app."""
     app.command("export")(export_command)
     app.command("ingest")(ingest_command)
+    app.command("sheet")(sheet_command)

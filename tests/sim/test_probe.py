@@ -16,7 +16,7 @@ K = SkinConfig().stiffness_pa_per_m
 def rig(part_name: str, probe: Probe, cfg: SkinConfig | None = None) -> ProbeRig:
     part = get_part(part_name)
     skin = SkinInstance.create(
-        part.layout.positions_m, cfg or SkinConfig(), np.random.default_rng(0)
+        part.layout.positions_m, cfg or SkinConfig(), np.random.default_rng(0), part.sensor_faces
     )
     return ProbeRig(part, probe, central_taxel(part), skin)
 
@@ -37,13 +37,29 @@ def test_sphere_settles_at_the_foundation_depth(part_name: str, force_n: float) 
 
 
 def test_flat_punch_gives_uniform_pressure_force_over_area() -> None:
+    """Force-consistent pressure (`sim.skin`): a flat punch reads a uniform F / A under it, with
+    A the pressed taxels' area on the sensor mesh (sum(p A) = F); that area samples the punch's
+    pi r^2 (8 mm pitch, r = 25 mm, the rim and the mesh's holes at module corners: 0.84 pi r^2)."""
     cfg = SkinConfig(spread_sigma_m=0.0)
     r = rig("plate", Probe("cylinder", (0.025, 0.01)), cfg)
     result = r.press(20.0)
     under = result.contactor >= 0
+    area = r.skin.area_m2[under]
     assert under.sum() >= 25
-    np.testing.assert_allclose(result.pressure_pa[under], 20.0 / (np.pi * 0.025**2), rtol=0.03)
+    assert float(result.pressure_pa @ r.skin.area_m2) == pytest.approx(20.0, rel=0.05)
+    np.testing.assert_allclose(result.pressure_pa[under], 20.0 / area.sum(), rtol=1e-6)
+    assert area.sum() == pytest.approx(np.pi * 0.025**2, rel=0.2)
     np.testing.assert_array_equal(result.pressure_pa[~under], 0.0)
+
+
+def test_punch_doubling_the_force_doubles_every_pressure() -> None:
+    """A flat punch (r = 20 mm, spread on): Σ p A = F within 5 %, and at twice the force the same
+    taxels read twice the pressure (a flat face's depth profile keeps its shape)."""
+    r = rig("plate", Probe("cylinder", (0.02, 0.01)))
+    one, two = r.press(8.0), r.press(16.0)
+    assert float(one.pressure_pa @ r.skin.area_m2) == pytest.approx(8.0, rel=0.05)
+    np.testing.assert_array_equal(one.contactor >= 0, two.contactor >= 0)
+    np.testing.assert_allclose(two.pressure_pa, 2.0 * one.pressure_pa, rtol=1e-3, atol=1e-6)
 
 
 def test_contact_radius_sets_the_active_taxels() -> None:

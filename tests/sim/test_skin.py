@@ -10,8 +10,11 @@ from sim.skin import (
     SkinConfig,
     SkinInstance,
     depth_to_pressure,
+    force_consistent_pressure,
+    lattice_spacing_m,
     quantize,
     spread_matrix,
+    taxel_areas_m2,
 )
 from tactile.errors import ConfigError
 from tactile.synthetic import hex_lattice_mm
@@ -104,3 +107,38 @@ def test_dead_modules_read_baseline_but_keep_truth() -> None:
 def test_config_rejects_bad_values(field: str) -> None:
     with pytest.raises(ConfigError, match=field):
         SkinConfig(**{field: -1.0})
+
+
+def test_taxel_areas_sum_to_the_mesh_area_and_fall_back_to_hex_cells() -> None:
+    pos = np.array([[0.0, 0, 0], [0.01, 0, 0], [0.0, 0.02, 0], [0.01, 0.02, 0]])
+    faces = np.array([[0, 1, 2], [1, 3, 2]])  # a 10 x 20 mm rectangle
+    area = taxel_areas_m2(pos, faces)
+    np.testing.assert_allclose(area, np.array([1, 2, 2, 1]) / 3 * 1e-4)
+    assert area.sum() == pytest.approx(2e-4)
+    hexes = lattice_m(8.0)
+    np.testing.assert_allclose(taxel_areas_m2(hexes), 0.008**2 * np.sqrt(3) / 2)
+    assert lattice_spacing_m(hexes) == pytest.approx(0.008)
+
+
+def test_force_consistent_pressure_keeps_shape_and_resultant() -> None:
+    base = np.array([0.0, 1e5, 2e5, 1e5, 0.0])
+    area = np.array([1.0, 2.0, 1.0, 2.0, 1.0]) * 1e-4
+    p = force_consistent_pressure(base, area, 6.0)
+    assert p @ area == pytest.approx(6.0)
+    np.testing.assert_allclose(p, base * (6.0 / (base @ area)))
+    np.testing.assert_allclose(force_consistent_pressure(base, area, 12.0), 2 * p)  # linear in F
+    np.testing.assert_array_equal(force_consistent_pressure(np.zeros(5), area, 6.0), 0.0)
+    np.testing.assert_array_equal(force_consistent_pressure(base, area, 0.0), 0.0)
+
+
+def test_skin_pressure_scales_to_the_sensed_force_unless_switched_off() -> None:
+    pos = lattice_m()
+    depth = np.where(np.linalg.norm(pos, axis=1) < 0.02, 1e-3, 0.0)
+    for sigma in (0.0, 3e-3):
+        skin = SkinInstance.create(pos, SkinConfig(spread_sigma_m=sigma), np.random.default_rng(0))
+        assert skin.pressure(depth, 4.0) @ skin.area_m2 == pytest.approx(4.0, rel=0.02)
+        np.testing.assert_allclose(skin.pressure(depth), skin.spread @ (1e8 * depth))  # no force
+    elastic = SkinInstance.create(pos, SkinConfig(force_consistent=False), np.random.default_rng(0))
+    np.testing.assert_allclose(elastic.pressure(depth, 4.0), elastic.pressure(depth))
+    frame = skin.frame(depth, None, force_n=4.0)
+    np.testing.assert_allclose(frame.pressure_pa, skin.pressure(depth, 4.0))

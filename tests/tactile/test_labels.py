@@ -13,6 +13,7 @@ from tactile.labels import (
     PartSummary,
     backproject,
     colorize,
+    label_image,
     part_summary,
 )
 from tactile.resize import resize_labels
@@ -44,6 +45,21 @@ def test_palette_and_names() -> None:
     assert not PALETTE[0].any()
     assert len({tuple(c) for c in PALETTE}) == 7
     assert colorize(np.array([[0, 6]])).shape == (1, 2, 3)
+
+
+def test_precomputed_image_gives_the_same_labels_and_unlabelled_skips_it(
+    forearm: TactileMap, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    p, labels = two_contacts(forearm)
+    want = forearm.label_image(p, labels)
+    image = forearm.image(p)
+    calls = []
+    monkeypatch.setattr(TactileMap, "image", lambda *a, **k: calls.append(1))
+    np.testing.assert_array_equal(label_image(forearm, p, labels, image=image), want)
+    blank = label_image(forearm, p, np.zeros_like(labels))  # a non-hand contact: no class
+    assert not calls and blank.shape == forearm.shape and not blank.any()
+    with pytest.raises(MapError, match="shape"):
+        label_image(forearm, p, labels, image=image[:-1])
 
 
 def test_separated_regions_get_their_class(forearm: TactileMap) -> None:

@@ -1,0 +1,190 @@
+"""`handskin generate`: same bytes for any worker count, resume after SIGKILL, refusals before work,
+shards merged equal a single run, configuration errors naming field and range; Ray if installed."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim.gen_config import GenerateConfig, load_generate_config
+from sim.generate import generate, is_hand_index, merge_shards, parse_shard, shard_chunks
+from tactile.config import to_toml
+from tactile.dataset import list_chunks, open_dataset
+from tactile.errors import ConfigError, DataError
+
+ROOT = Path(__file__).resolve().parents[2]
+# 12 plate samples in 4 chunks of 3, short presses: about a second of simulation per run. A
+# hand is sometimes too big for the small plate: more attempts than the default keep it robust.
+SMALL = {"part": "plate", "n": 12, "chunk_size": 3, "n_subjects": 3, "instances_per_kind": 2,
+         "duration_scale": 0.5, "seed": 5, "episode": {"max_attempts": 20}}  # fmt: skip
+
+
+def small(**kw: object) -> GenerateConfig:
+    return load_generate_config(None, **(SMALL | kw))
+
+
+def sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An uninterrupted in-process run (one worker) of the small configuration."""
+    out = tmp_path_factory.mktemp("ref") / "ds"
+    report = generate(small(), out, workers=1, progress=False)
+    assert report.dataset == out / "dataset.h5" and report.n_computed == 12
+    return out
+
+
+def test_two_workers_give_the_same_bytes_as_one(reference: Path, tmp_path: Path) -> None:
+    generate(small(), tmp_path / "w2", workers=2, progress=False)
+    assert sha256(tmp_path / "w2" / "dataset.h5") == sha256(reference / "dataset.h5")
+
+
+def test_dataset_content_classes_subjects_and_split(reference: Path) -> None:
+    with open_dataset(reference) as ds:
+        is_hand = ds["is_hand"][()]
+        want = [is_hand_index(i, small().hand_fraction) for i in range(12)]
+        np.testing.assert_array_equal(is_hand, want)
+        assert set(ds["subject_id"][()][is_hand == 1]) <= {0, 1, 2}
+        train, test = ds.splits["train"], ds.splits["test"]
+        assert len(train) + len(test) == 12
+        subj = ds["subject_id"][()]
+        assert not set(subj[train][subj[train] >= 0]) & set(subj[test][subj[test] >= 0])
+        assert ds.attrs["config"]["n"] == 12 and ds.attrs["seed"] == 5
+        assert ds.attrs["versions"]["mujoco"] and ds.attrs["generator_version"]
+
+
+def test_sigkill_mid_run_then_resume_equals_uninterrupted(reference: Path, tmp_path: Path) -> None:
+    out = tmp_path / "killed"
+    cfg_file = tmp_path / "small.toml"
+    cfg_file.write_text(to_toml(small()))  # the CLI options below repeat some of its values
+    argv = [sys.executable, "-c", "from handskin.cli import main; main()", "generate",
+            "--out", str(out), "--workers", "1", "--quiet", "--config", str(cfg_file),
+            *[f"--{k.replace('_', '-')}={v}" for k, v in SMALL.items() if k in CLI]]
+    log = tmp_path / "stderr.txt"
+    with log.open("w") as err:
+        proc = subprocess.Popen(argv, cwd=ROOT, env=_env(), stderr=err)
+    try:
+        _wait_for(lambda: len(list_chunks(out)) >= 1, proc, timeout_s=60, log=log)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert 1 <= len(list_chunks(out)) < 4 and not (out / "dataset.h5").exists()
+    subprocess.run(argv, cwd=ROOT, env=_env(), check=True)
+    assert sha256(out / "dataset.h5") == sha256(reference / "dataset.h5")
+
+
+CLI = ("part", "n", "seed", "chunk_size")
+
+
+def _env() -> dict[str, str]:
+    return dict(os.environ, PYTHONPATH=str(ROOT))
+
+
+def _wait_for(cond, proc: subprocess.Popen, timeout_s: float, log: Path) -> None:
+    end = time.monotonic() + timeout_s
+    while not cond():
+        assert proc.poll() is None, f"the generator ended before the kill: {log.read_text()}"
+        assert time.monotonic() < end, "no chunk written in time"
+        time.sleep(0.01)  # a chunk takes >= 0.1 s: the kill lands before the next one
+
+
+def test_folder_of_another_configuration_is_refused_untouched(reference: Path) -> None:
+    before = {p: p.stat().st_mtime_ns for p in reference.rglob("*")}
+    t0 = time.perf_counter()
+    with pytest.raises(DataError, match=r"another configuration.*seed"):
+        generate(small(seed=6), reference, workers=1, progress=False)
+    assert time.perf_counter() - t0 < 2.0
+    assert {p: p.stat().st_mtime_ns for p in reference.rglob("*")} == before
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"n": -5}, r"n = -5 is out of range; allowed \[1, 100000000\]"),
+        ({"hand_fraction": 1.5}, r"hand_fraction = 1.5 is out of range; allowed \[0, 1\]"),
+        ({"part": "foream"}, r"unknown part 'foream'; known parts: forearm.*link mesh file"),
+        ({"chunk_size": 0}, r"chunk_size = 0 is out of range"),
+    ],
+)
+def test_bad_values_fail_naming_field_and_range(changes: dict, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        small(**changes)
+
+
+def test_bad_config_files_fail_before_any_work(tmp_path: Path) -> None:
+    bad = {
+        "unknown key": ("n_subject = 5\n", r"unknown key 'n_subject'.*known keys:.*n_subjects"),
+        "nested range": ("[episode]\ntimestep_s = 0.5\n", r"episode.timestep_s = 0.5 is out of"),
+        "skin": ("[episode.skin]\nnoise_std_counts = -1.0\n", r"noise_std_counts.*>= 0"),
+        "type": ('n = "many"\n', r"n: expected int"),
+    }
+    for name, (text, message) in bad.items():
+        path = tmp_path / f"{name}.toml"
+        path.write_text(text)
+        with pytest.raises(ConfigError, match=message):
+            load_generate_config(path)
+    assert not list(tmp_path.glob("*/chunks"))
+
+
+def test_cli_reports_bad_input_with_exit_code_2(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from handskin.cli import app
+
+    out = tmp_path / "never"
+    result = CliRunner().invoke(app, ["generate", "--out", str(out), "--n", "-3"])
+    assert result.exit_code == 2 and "n = -3 is out of range" in result.output
+    assert not out.exists()
+
+
+def test_shards_merged_equal_a_single_run(reference: Path, tmp_path: Path) -> None:
+    assert parse_shard("1/3") == (1, 3) and shard_chunks(4, (1, 3)) == [1]
+    shards = [tmp_path / f"shard{i}" for i in range(2)]
+    for i, folder in enumerate(shards):
+        report = generate(small(), folder, workers=1, shard=(i, 2), progress=False)
+        assert report.dataset is None and list_chunks(folder) == [i, i + 2]
+    merged = merge_shards(shards, tmp_path / "merged")
+    assert sha256(merged) == sha256(reference / "dataset.h5")
+    generate(small(seed=9), tmp_path / "other", workers=1, shard=(0, 2), progress=False)
+    with pytest.raises(DataError, match="another dataset"):
+        merge_shards([shards[0], tmp_path / "other"], tmp_path / "mixed")
+
+
+def test_ray_run_gives_the_same_bytes(reference: Path, tmp_path: Path) -> None:
+    pytest.importorskip("ray", reason="the ray extra is not installed")
+    generate(small(), tmp_path / "ray", workers=2, ray="local", progress=False)
+    assert sha256(tmp_path / "ray" / "dataset.h5") == sha256(reference / "dataset.h5")
+
+
+def test_contact_sheet_of_the_generated_dataset(reference: Path, tmp_path: Path) -> None:
+    from tactile.dataset.cli import select_samples, write_sheet
+
+    png = write_sheet(reference, tmp_path / "hands.png", n=4, cls="hand")
+    assert png.stat().st_size > 1000
+    with open_dataset(reference) as ds:
+        picked = select_samples(ds, cls="non_hand", n=3)
+        assert len(picked) == 3 and not ds["is_hand"][()][picked].any()
+        with pytest.raises(DataError, match="unknown; actions: grasp"):
+            select_samples(ds, action="wave")
+
+
+def test_folder_started_by_other_code_is_refused_with_the_reason(tmp_path: Path) -> None:
+    from sim.gen_config import generator_version, refuse_other_code
+    from tactile.dataset.manifest import make_manifest
+
+    cfg = small()
+    old = make_manifest(cfg, cfg.part_id(), "0.0.1+src.000000000000", cfg.seed)
+    (tmp_path / "manifest.json").write_text(json.dumps(old))
+    with pytest.raises(DataError, match="started by other generator code"):
+        refuse_other_code(tmp_path, make_manifest(cfg, "plate", generator_version(), cfg.seed))
