@@ -14,10 +14,10 @@ import typer
 from tactile.errors import HandskinError
 
 # label: (shape, size_m). The R10 sphere's depth stays within the 2 mm layer up to 12.6 N.
-PROBE_SET = {
-    "sphere R10 mm": ("sphere", (0.010,)),  # its one taxel saturates near 4–5 N
-    "sphere R25 mm": ("sphere", (0.025,)),  # saturates near 11 N
-    "flat cylinder r10 mm": ("cylinder", (0.010, 0.010)),  # 38 kPa at 12 N: linear throughout
+PROBE_SET = {  # sized for the default skin's 10.6 mm pad pitch (taxel area ~110 mm²)
+    "sphere R10 mm": ("sphere", (0.010,)),  # one taxel carries the load: saturates first
+    "sphere R40 mm": ("sphere", (0.040,)),  # contact radius sqrt(2Rd) grows: more taxels
+    "flat cylinder r20 mm": ("cylinder", (0.020, 0.010)),  # ~F/1260 mm²: linear, no saturation
 }
 
 
@@ -88,7 +88,7 @@ def part_command(
 def probe_command(
     part: Annotated[str, typer.Option(help="Part to probe at its central taxel.")] = "forearm",
     png: Annotated[Path | None, typer.Option(help="Write the calibration chart (PNG).")] = None,
-    max_force: Annotated[float, typer.Option(help="Largest indenter force, N.")] = 15.0,
+    max_force: Annotated[float, typer.Option(help="Largest indenter force, N.")] = 40.0,
     n_forces: Annotated[int, typer.Option(help="Number of forces from 0 to max-force.")] = 61,
     seed: Annotated[int, typer.Option(help="Seed of the per-taxel gains and baselines.")] = 0,
 ) -> None:
