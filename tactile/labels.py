@@ -95,9 +95,30 @@ def label_image(
     if image is None:
         image = tmap.image(p, erode_px=erode_px, dilate_px=dilate_px)
     foreground = np.asarray(image) > 0
-    fields = np.where(lab[None, :] == np.arange(N_CLASSES)[:, None], p[None, :], 0.0)
-    spread = morphology.dilate(np.ascontiguousarray(tmap.interpolate(fields)), dilate_px)
-    return np.where(foreground, spread.argmax(axis=0), 0).astype(np.uint8)
+    out = np.zeros(tmap.shape, dtype=np.uint8)
+    if not foreground.any():
+        return out
+    # Only the classes present (background always, so ties resolve as over all 7 classes), and
+    # only the foreground's box grown by the dilation radius: the same result, a fraction of
+    # the work.
+    classes = np.union1d([0], lab[p > 0])
+    fields = np.where(lab[None, :] == classes[:, None], p[None, :], 0.0)
+    rows, cols = _grown_box(foreground, dilate_px)
+    interpolated = tmap.interpolate(fields)[:, rows, cols]
+    spread = morphology.dilate(np.ascontiguousarray(interpolated), dilate_px)
+    out[rows, cols] = np.where(foreground[rows, cols], classes[spread.argmax(axis=0)], 0)
+    return out
+
+
+def _grown_box(mask: np.ndarray, margin_px: int) -> tuple[slice, slice]:
+    """Row and column slices of the bounding box of ``mask`` (H, W) grown by ``margin_px``."""
+    r = np.flatnonzero(mask.any(axis=1))
+    c = np.flatnonzero(mask.any(axis=0))
+    h, w = mask.shape
+    return (
+        slice(max(r[0] - margin_px, 0), min(r[-1] + margin_px + 1, h)),
+        slice(max(c[0] - margin_px, 0), min(c[-1] + margin_px + 1, w)),
+    )
 
 
 def colorize(classes: np.ndarray) -> np.ndarray:

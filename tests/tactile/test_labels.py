@@ -130,3 +130,29 @@ def test_resize_labels_nearest_keeps_classes() -> None:
     batch = resize_labels(np.stack([lbl, lbl]), (68, 100))
     np.testing.assert_array_equal(batch[1], small)
     np.testing.assert_array_equal(resize_labels(lbl, lbl.shape), lbl)
+
+
+def _label_image_all_classes(tmap, p, labels, erode_px=2, dilate_px=4):
+    """Reference: every class field at full size, dilated, arg-max where the image is lit."""
+    from tactile import morphology
+
+    image = tmap.image(p, erode_px=erode_px, dilate_px=dilate_px)
+    fields = np.where(labels[None, :] == np.arange(7)[:, None], p[None, :], 0.0)
+    spread = morphology.dilate(np.ascontiguousarray(tmap.interpolate(fields)), dilate_px)
+    return np.where(image > 0, spread.argmax(axis=0), 0).astype(np.uint8)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_label_image_equals_the_all_classes_reference(seed: int):
+    layout, flat_mm = cylinder_sector_layout()
+    tmap = TactileMap.from_flat(
+        layout.positions_m, flat_mm, np.arange(layout.n_taxels), Delaunay(flat_mm).simplices
+    )
+    rng = np.random.default_rng(seed)
+    centre = flat_mm[rng.integers(layout.n_taxels)]
+    near = np.linalg.norm(flat_mm - centre, axis=1) < rng.uniform(20, 90)
+    p = np.where(near, rng.uniform(0, 5e4, layout.n_taxels), 0.0)
+    labels = np.where(near, rng.integers(0, 7 if seed % 2 else 3, layout.n_taxels), 0)
+    np.testing.assert_array_equal(
+        label_image(tmap, p, labels), _label_image_all_classes(tmap, p, labels)
+    )
