@@ -15,17 +15,24 @@ values rounded, circumferences turned into radii by C / 2 pi):
   45-65 cm, calf 31-41 cm; flexion 60-110 deg;
 - head breadth 14-16.5 cm, length 18-21 cm, height (chin to vertex) 21-24 cm.
 
-Tissue (`sim.objects.MATERIALS`): muscle and fat over bone (forearm, upper arm, chest, back,
-shoulder) compliance depth 4-10 mm; skin over bone (elbow, knee, head) 2-4 mm; both softer than
-or as soft as a fingertip (hands use 1.5-6 mm). Mass: gravity is off in the press scene and the
-force is commanded, so mass only sets the contact dynamics; MuJoCo's contact depth at a given
-force falls with the effective mass, so body parts get an effective mass of 1-4 kg (the range of
-the arm segments, de Leva 1996: forearm 1.6 %, upper arm 2.7 % of 60-90 kg) instead of a trunk's.
+Tissue (`sim.primitives.MATERIALS`, argued there): the rigid primitives stand for bone plus the
+soft tissue that flattens on the link, so the compliance depth (solimp width) follows the tissue's
+thickness with the hands' rule (`sim.hand`: palm 10.5 mm, fingertip 8.75 mm): fat and muscle over
+bone (forearm, upper arm, chest, back, shoulder; 2-5 cm thick) 12-25 mm, skin and pads over bone
+(elbow, knee, head; 5-10 mm) 6-12 mm. A forearm resting across the link, or a chest leaning on
+it, thus lights a band several centimetres wide, as soft tissue does. Mass: gravity is off in the
+press scene and the force is commanded, so mass only sets the contact dynamics; MuJoCo's contact
+depth at a given force falls with the effective mass, so body parts get an effective mass of
+1-4 kg (the range of the arm segments, de Leva 1996: forearm 1.6 %, upper arm 2.7 % of 60-90 kg)
+instead of a trunk's.
 
 Presses (`BODY_MODES`): leaning, resting an arm across, bumping, pressing. Forces (N) per kind:
-resting a forearm ~ its weight (forearm + hand 2.2 % of body mass, 13-20 N) up to a lean of 40 N;
-leaning with the trunk, shoulder or elbow 10-80 N; the head rests with part of its weight (6.9 %,
-40-60 N) 5-40 N. All stay below the ISO/TS 15066 quasi-static limits (110-220 N, face 65 N).
+resting a forearm or upper arm is its weight (forearm + hand 2.2 %, whole arm 5 % of 60-90 kg:
+13-45 N) up to a lean of 60 N; leaning with the elbow or knee 10-60 / 10-80 N; with the shoulder,
+chest or back part of the trunk's weight, 15-100 N (leaning on a table puts 10-20 % of body
+weight, 60-180 N, on the forearms); the head rests with part of its weight (6.9 %, 40-60 N)
+5-40 N. All stay below the ISO/TS 15066 quasi-static limits (chest 140 N, back and shoulders
+210 N, arms 150-220 N, face 65 N).
 """
 
 from __future__ import annotations
@@ -59,13 +66,19 @@ def _r(**kw: float) -> dict[str, float]:
 
 
 def _forearm(rng: np.random.Generator) -> Built:
-    """Lying along x: muscle belly (flattened ellipsoid) tapering into a wrist capsule."""
+    """Lying along x: muscle belly (flattened ellipsoid) tapering into a wrist capsule, and the
+    ulna's subcutaneous border (thin tissue) 2-4 mm proud of the belly, where a resting forearm
+    bears (a ridge of peak pressure along the print)."""
     length, half_w, wrist = unif(rng, 0.24, 0.29), unif(rng, 0.038, 0.050), unif(rng, 0.022, 0.030)
     belly = prim("belly", "ellipsoid", (0.3 * length, half_w, 0.8 * half_w), material=SOFT)
     z = 0.8 * half_w - wrist  # wrist bottom flush with the belly's
+    ridge, proud = unif(rng, 0.010, 0.014), unif(rng, 0.002, 0.004)
+    zr = -0.8 * half_w + ridge - proud
     out = [belly, segment("wrist", "capsule", (0.1 * length, 0, z), (0.55 * length, 0, z), wrist,
-                          SOFT)]
-    return out, _r(length=length, half_width=half_w, wrist_radius=wrist), unif(rng, 1.0, 1.6)
+                          SOFT),
+           segment("ulna", "capsule", (-0.2 * length, 0, zr), (0.5 * length, 0, zr), ridge, THIN)]
+    dims = _r(length=length, half_width=half_w, wrist_radius=wrist, ulna_proud=proud)
+    return out, dims, unif(rng, 1.0, 1.6)
 
 
 def _upper_arm(rng: np.random.Generator) -> Built:
@@ -202,13 +215,13 @@ _MODE_SHAPES = {
     "pressed": PressMode((0.0, 1.0), (0.0, 0.15)),
 }
 BODY_MODES: dict[str, tuple[tuple[float, float], tuple[str, ...]]] = {  # force range N, modes
-    "forearm": ((5.0, 40.0), ("resting", "leaning", "bumped")),
-    "upper_arm": ((5.0, 40.0), ("resting", "leaning", "bumped")),
+    "forearm": ((10.0, 60.0), ("resting", "leaning", "bumped")),
+    "upper_arm": ((10.0, 60.0), ("resting", "leaning", "bumped")),
     "elbow": ((10.0, 60.0), ("leaning", "bumped", "pressed")),
-    "shoulder": ((10.0, 80.0), ("bumped", "leaning")),
-    "chest": ((10.0, 80.0), ("leaning", "bumped")),
-    "back": ((10.0, 80.0), ("leaning", "resting")),
-    "knee": ((10.0, 60.0), ("pressed", "bumped", "leaning")),
+    "shoulder": ((15.0, 100.0), ("bumped", "leaning")),
+    "chest": ((15.0, 100.0), ("leaning", "bumped")),
+    "back": ((15.0, 100.0), ("leaning", "resting")),
+    "knee": ((10.0, 80.0), ("pressed", "bumped", "leaning")),
     "head": ((5.0, 40.0), ("resting", "leaning")),
 }
 

@@ -5,7 +5,11 @@ Mixture (documented weights, drawn by `sample_nonhand`):
   about 35 % of them other body parts (torso, arm, forearm, shoulder, back), the rest objects.
 - Objects: the hard negatives (rake, comb, rod bundle: 2-6 parallel finger-like geoms) take 30 %
   (10 % each) because they are what a classifier that counts elongated blobs would call a hand;
-  the 13 other kinds share the remaining 70 % equally (about 5.4 % each).
+  broad objects pressed flat or resting across the link (`BROAD_OBJECTS`: cushion, bundle, big
+  ball, plate, box) take 30 % (6 % each): what people carry past, put down on or push against a
+  robot in a shared workspace is mostly boxes, trays, bags and clothes, and they are what a
+  classifier that measures contact area would call a hand; the 11 other kinds (tools, bottles,
+  mugs, small balls: tips and edges) share the remaining 40 % equally (about 3.6 % each).
 - Body parts: arms and shoulders lean on a robot arm most (the paper's list: arm, forearm,
   shoulder, torso, back): forearm 20 %, upper arm 15 %, elbow 15 %, shoulder 15 %, chest 10 %,
   back 10 %, knee 8 %, head 7 %.
@@ -35,6 +39,8 @@ from tactile.errors import ConfigError
 
 OBJECT_FRACTION = 0.65  # Albini & Cannata 2020: ~35 % of non-hand contacts were body parts
 HARD_NEGATIVE_SHARE = 0.30  # of objects, split equally among HARD_NEGATIVES
+BROAD_OBJECTS: tuple[str, ...] = ("cushion", "bundle", "big_ball", "plate", "box")
+BROAD_SHARE = 0.30  # of objects, split equally among BROAD_OBJECTS
 BODY_WEIGHTS: dict[str, float] = {
     "forearm": 0.20, "upper_arm": 0.15, "elbow": 0.15, "shoulder": 0.15, "chest": 0.10,
     "back": 0.10, "knee": 0.08, "head": 0.07,
@@ -44,10 +50,13 @@ OBJECT_ID_BASE, BODY_ID_BASE = 100_000, 500_000  # global instance ids: base + 1
 
 
 def object_weights() -> dict[str, float]:
-    """Probability of each object kind (sums to 1)."""
-    easy = [k for k in OBJECT_KINDS if k not in HARD_NEGATIVES]
-    w = {k: (1.0 - HARD_NEGATIVE_SHARE) / len(easy) for k in easy}
-    w |= {k: HARD_NEGATIVE_SHARE / len(HARD_NEGATIVES) for k in HARD_NEGATIVES}
+    """Probability of each object kind (sums to 1): `HARD_NEGATIVE_SHARE` and `BROAD_SHARE` split
+    equally within their groups, the rest equally among the other kinds."""
+    groups = (HARD_NEGATIVES, BROAD_OBJECTS)
+    rest = [k for k in OBJECT_KINDS if not any(k in g for g in groups)]
+    w = {k: (1.0 - HARD_NEGATIVE_SHARE - BROAD_SHARE) / len(rest) for k in rest}
+    for group, share in zip(groups, (HARD_NEGATIVE_SHARE, BROAD_SHARE), strict=True):
+        w |= {k: share / len(group) for k in group}
     return {k: w[k] for k in OBJECT_KINDS}
 
 

@@ -31,9 +31,23 @@ MATERIALS: dict[str, tuple[float, tuple[float, float], float]] = {
     "hard_plastic": (1100.0, (0.0015, 0.0030), 0.4),
     "rubber": (1100.0, (0.0030, 0.0060), 1.0),
     "foam": (50.0, (0.0060, 0.0120), 1.0),
-    "soft_tissue": (1050.0, (0.0040, 0.0100), 0.8),  # muscle and fat over bone (body parts)
-    "thin_tissue": (1050.0, (0.0020, 0.0040), 0.8),  # skin over bone: elbow, knee, skull
+    "padding": (40.0, (0.0150, 0.0300), 0.9),  # cushions, stuffed bags, clothes: see below
+    "inflatable": (30.0, (0.0150, 0.0300), 0.8),  # soft inflated balls: see below
+    "soft_tissue": (1050.0, (0.0120, 0.0250), 0.8),  # fat and muscle over bone: see below
+    "thin_tissue": (1050.0, (0.0060, 0.0120), 0.8),  # skin and pads over bone: see below
 }
+# Thick compliant contactors get the hands' rule (`sim.hand`: allowance ~ 1-2.5 x the tissue's
+# thickness, palm 10.5 mm over 8-15 mm of tissue, fingertip 8.75 mm over 3-5 mm of pulp):
+# - soft_tissue 12-25 mm: fat plus relaxed muscle over the ulna/humerus, ribs or scapula is
+#   2-5 cm thick (ultrasound: subcutaneous fat 3-10 mm on the forearm, 5-20 mm over triceps,
+#   chest and back; muscle 10-40 mm); at 10-100 N it indents 30-50 % of that (soft-tissue
+#   indentation of the limbs, e.g. Zheng & Mak 1999: moduli 10-100 kPa, tissue 1-5 cm);
+# - thin_tissue 6-12 mm: skin, fat and bursa over the olecranon and patella, scalp (5-10 mm
+#   thick), at the fingertip's 2-2.5 x;
+# - padding 15-30 mm: cushions, stuffed bags, folded clothes (upholstery foam E ~ 5-20 kPa,
+#   5-15 cm thick, 10-30 % strain at tens of N on a hand-sized area);
+# - inflatable 15-30 mm: gym, beach and toy balls at 1-20 kPa gauge spread 30 N over
+#   15-300 cm^2, a flattening of centimetres.
 SOLREF = (0.01, 1.0)  # s, damping ratio: the hand's; >= 2 time steps up to dt = 5 ms
 # max_penetration_m / largest compliance depth: readings reach 0.5-1.3 x the depth under 40 N;
 # MuJoCo's box distance reads up to sqrt(3) x deeper near edges (sim.readout), so thin boxes

@@ -107,6 +107,8 @@ RANGES = {
     "rake": [("tine_radius", 0.006, 0.011), ("spacing", 0.015, 0.025)],
     "comb": [("tooth_width", 0.012, 0.022), ("spacing", 0.015, 0.025)],
     "rod_bundle": [("radius_mean", 0.006, 0.011), ("spacing", 0.015, 0.025)],
+    "cushion": [("half_x", 0.12, 0.25), ("half_z", 0.03, 0.07)],
+    "big_ball": [("radius", 0.12, 0.33)], "bundle": [("n_lumps", 3, 5)],
 }
 
 
@@ -118,7 +120,7 @@ def test_dimensions_within_argued_ranges(kind: str) -> None:
         for key, lo, hi in RANGES[kind]:
             assert lo - 1e-5 <= dims[key] <= hi + 1e-5, (key, dims[key])
         widths = c.description["stiffness"]["compliance_depth_m"].values()
-        assert all(0.001 <= w <= 0.012 for w in widths)
+        assert all(0.001 <= w <= 0.030 for w in widths)
         assert 0 < c.description["mass_kg"] < 10
 
 
