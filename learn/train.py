@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -32,13 +31,8 @@ from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
 from learn.losses import SegmentationLoss
 from learn.models import create_model
-from tactile.config import from_dict, to_dict, to_toml
+from tactile.config import from_dict, read_toml, to_dict, to_toml
 from tactile.errors import ConfigError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    import tomli as tomllib
 
 N_VIEWS = 3  # original, horizontal flip, vertical flip
 TASK_OF_ARCH = {"handsnet": "classify", "vgg16": "classify", "segnet": "segment",
@@ -292,13 +286,7 @@ def run_from_dict(table: Mapping, base: RunConfig | None = None) -> RunConfig:
 
 def load_run_config(path: str | Path, base: RunConfig | None = None) -> RunConfig:
     """A TOML run configuration laid over ``base``; ConfigError names the file and the key."""
-    path = Path(path)
-    try:
-        table = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as err:
-        raise ConfigError(f"config file {path} does not exist") from err
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML ({err})") from err
+    table = read_toml(path)
     try:
         return run_from_dict(table, base)
     except ConfigError as err:

@@ -112,15 +112,20 @@ def from_dict(cls: type[T], table: Mapping[str, Any], *, prefix: str = "") -> T:
         raise ConfigError(f"[{prefix.rstrip('.') or cls.__name__}] {err}") from err
 
 
-def load_config(path: str | Path, cls: type[T]) -> T:
-    """Read a TOML file into dataclass ``cls`` (see :func:`from_dict`)."""
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """The table of a TOML file; ConfigError when it is missing or not valid TOML."""
     path = Path(path)
     try:
-        table = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError as err:
         raise ConfigError(f"config file {path} does not exist") from err
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{path}: not valid TOML ({err}); fix the syntax at that line") from err
+
+
+def load_config(path: str | Path, cls: type[T]) -> T:
+    """Read a TOML file into dataclass ``cls`` (see :func:`from_dict`)."""
+    table = read_toml(path)
     try:
         return from_dict(cls, table)
     except ConfigError as err:
