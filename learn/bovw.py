@@ -10,6 +10,7 @@ on a regular grid, without keypoint detection or rotation. Dense grids are also 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import asdict
 
 import numpy as np
 from skimage.feature import SIFT
@@ -17,7 +18,9 @@ from skimage.util import img_as_float
 from sklearn.cluster import MiniBatchKMeans
 from sklearn.svm import LinearSVC
 
+from learn.classical import LinearSvm
 from learn.config import BovwConfig
+from tactile.config import from_dict
 from tactile.errors import DataError
 
 N_BINS = 8  # orientations per cell, as SIFT
@@ -80,6 +83,15 @@ def image_descriptors(image: np.ndarray, cfg: BovwConfig | None = None) -> np.nd
     return dense_descriptors(img, cfg.grid_step_px, cfg.patch_px)
 
 
+def nearest_words(desc: np.ndarray, vocabulary: np.ndarray) -> np.ndarray:
+    """``(N,)`` int64 index of the nearest (Euclidean) vocabulary row of each descriptor.
+
+    desc : ``(N, 128)`` float. vocabulary : ``(K, 128)`` float (k-means centres)."""
+    desc = np.asarray(desc, np.float64)
+    d2 = (vocabulary**2).sum(1)[None, :] - 2.0 * desc @ vocabulary.T
+    return d2.argmin(axis=1).astype(np.int64)
+
+
 def word_histogram(words: np.ndarray, vocabulary_size: int) -> np.ndarray:
     """``(K,)`` L2-normalised counts of the visual-word ids ``words (N,)`` (zeros if N = 0)."""
     hist = np.bincount(words, minlength=vocabulary_size).astype(np.float64)
@@ -90,14 +102,16 @@ class BagOfVisualWords:
     """Bag-of-visual-words classifier: ``fit(images, labels)``, ``predict(images)``.
 
     images : sequence of ``(H, W)`` grey images (uint8 or float in [0, 1]) or a ``(N, H, W)``
-    array; labels : ``(N,)`` int. The vocabulary is ``cfg.vocabulary_size`` MiniBatchKMeans
-    centres (seeded); the classifier a ``LinearSVC`` on the word histograms.
+    array; labels : ``(N,)`` int. The vocabulary ``(K, 128)`` is ``cfg.vocabulary_size``
+    MiniBatchKMeans centres (seeded); the classifier a ``LinearSVC`` on the word histograms,
+    kept as arrays (``learn.classical.LinearSvm``) so that ``to_arrays`` / ``from_arrays`` save
+    and restore the exact model without pickle.
     """
 
     def __init__(self, cfg: BovwConfig | None = None) -> None:
         self.cfg = cfg or BovwConfig()
-        self.kmeans: MiniBatchKMeans | None = None
-        self.svm: LinearSVC | None = None
+        self.vocabulary: np.ndarray | None = None
+        self.svm: LinearSvm | None = None
 
     def fit(self, images: Images, labels: np.ndarray) -> BagOfVisualWords:
         """Learn the vocabulary from all descriptors of ``images``, then the SVM."""
@@ -108,33 +122,50 @@ class BagOfVisualWords:
                 f"BoVW: {len(stacked)} descriptors for {self.cfg.vocabulary_size} words; "
                 "give more images or a smaller BovwConfig.vocabulary_size"
             )
-        self.kmeans = MiniBatchKMeans(
+        kmeans = MiniBatchKMeans(
             self.cfg.vocabulary_size,
             batch_size=self.cfg.kmeans_batch_size,
             n_init=3,
             random_state=self.cfg.seed,
         ).fit(stacked)
-        self.svm = LinearSVC(C=self.cfg.svm_c, random_state=self.cfg.seed)
-        self.svm.fit(self._encode(per_image), np.asarray(labels))
+        self.vocabulary = np.asarray(kmeans.cluster_centers_, np.float64)
+        svc = LinearSVC(C=self.cfg.svm_c, random_state=self.cfg.seed)
+        self.svm = LinearSvm.from_sklearn(svc.fit(self._encode(per_image), np.asarray(labels)))
         return self
 
     def _encode(self, per_image: list[np.ndarray]) -> np.ndarray:
         """``(N, K)`` word histograms of per-image descriptor arrays."""
-        k = self.cfg.vocabulary_size
-        return np.stack([word_histogram(self.kmeans.predict(d), k) for d in per_image])
+        k = len(self.vocabulary)
+        return np.stack([word_histogram(nearest_words(d, self.vocabulary), k) for d in per_image])
 
     def transform(self, images: Images) -> np.ndarray:
         """``(N, K)`` L2-normalised visual-word histograms."""
-        if self.kmeans is None or self.svm is None:
+        if self.vocabulary is None or self.svm is None:
             raise DataError("BagOfVisualWords: call fit() before transform() / predict()")
         return self._encode([image_descriptors(img, self.cfg) for img in images])
 
     def decision_function(self, images: Images) -> np.ndarray:
         """SVM scores: ``(N,)`` for two classes, ``(N, C)`` otherwise."""
-        histograms = self.transform(images)
-        return self.svm.decision_function(histograms)
+        return self.svm_or_fail().decision_function(self.transform(images))
 
     def predict(self, images: Images) -> np.ndarray:
         """``(N,)`` predicted labels."""
-        histograms = self.transform(images)
-        return self.svm.predict(histograms)
+        return self.svm_or_fail().predict(self.transform(images))
+
+    def svm_or_fail(self) -> LinearSvm:
+        """The fitted SVM (DataError before ``fit``)."""
+        if self.svm is None:
+            raise DataError("BagOfVisualWords: call fit() before transform() / predict()")
+        return self.svm
+
+    def to_arrays(self) -> tuple[dict, dict[str, np.ndarray]]:
+        """(configuration dict, arrays: ``vocabulary`` (K, 128) and the SVM's) of a fitted model."""
+        return asdict(self.cfg), {"vocabulary": self.vocabulary, **self.svm_or_fail().arrays()}
+
+    @classmethod
+    def from_arrays(cls, meta: dict, arrays: dict[str, np.ndarray]) -> BagOfVisualWords:
+        """The model :meth:`to_arrays` described (``meta["config"]``: BovwConfig fields)."""
+        model = cls(from_dict(BovwConfig, meta["config"]))
+        model.vocabulary = np.asarray(arrays["vocabulary"], np.float64)
+        model.svm = LinearSvm.from_arrays(arrays)
+        return model

@@ -18,6 +18,7 @@ import typer
 from tactile.errors import ConfigError, DataError, HandskinError
 
 PRESETS = ("handsnet", "vgg16", "segnet", "fcn16s")
+CLASSICAL = ("bovw", "vgg_svm")  # as learn.classical.CLASSICAL (not imported: keeps --help fast)
 
 
 def _fail(err: Exception) -> typer.Exit:
@@ -35,7 +36,8 @@ def resolve_run(arch: str, config: Path | None, overrides: dict, test_c: bool):
     from learn.train import RunConfig, load_run_config, replace_train
 
     if arch not in PRESETS:
-        raise ConfigError(f"unknown arch {arch!r}; choose one of: {', '.join(PRESETS)}")
+        raise ConfigError(f"unknown arch {arch!r}; choose one of: "
+                          f"{', '.join(PRESETS + CLASSICAL)}")  # fmt: skip
     preset = {"handsnet": C.HANDSNET, "vgg16": C.VGG16_FINETUNE, "segnet": C.SEGNET,
               "fcn16s": C.FCN16S}[arch]  # fmt: skip
     run = RunConfig(model=preset.model, train=C.FINETUNE_TEST_C if test_c else preset.train)
@@ -73,17 +75,21 @@ def _opt(kind, help_text: str, *names: str):
 
 DataArg = Annotated[Path, typer.Argument(help="Dataset folder (dataset.h5) or image folder.")]
 OutOpt = _opt(Path, "Run folder: checkpoints, curves.png, run.toml.")
-ArchOpt = _opt(str, "handsnet | vgg16 | segnet | fcn16s (its preset configuration).")
+ArchOpt = _opt(str, "handsnet | vgg16 | segnet | fcn16s (its preset configuration), or the "
+               "classical baselines of Table 3: bovw | vgg_svm (OUT/model.npz; no unit).")
 ConfigOpt = _opt(Path | None, "TOML run config: model and train tables and top-level "
-                 "RunConfig keys, laid over the arch's preset.")
-EpochsOpt = _opt(int | None, "Epochs (each a pass over 3x the train images).")
+                 "RunConfig keys, laid over the arch's preset (bovw / vgg_svm: top-level "
+                 "BovwConfig / VggSvmConfig keys; bovw also input_size = [h, w] px).")
+EpochsOpt = _opt(int | None, "Epochs (each a pass over 3x the train images); vgg_svm without "
+                 "--init: epochs of the vgg16 trained first into OUT/vgg16.")
 BatchOpt = _opt(int | None, "Images per optimisation step.")
 LrOpt = _opt(float | None, "Initial learning rate (dimensionless, per step).")
 SeedOpt = _opt(int | None, "Seed of init, shuffling and splits (integer).")
 ValOpt = _opt(float | None, "Share (0-1) of the train split's subjects held out for validation.")
 HandOpt = _opt(str | None, "Image folders: comma-separated folder names that are 'hand' "
                "(e.g. hand,finger); default: every folder its own class.")
-InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file).")
+InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file); vgg_svm: the vgg16 "
+               "checkpoint whose features feed the SVM.")
 TestCOpt = _opt(bool, "The paper's Test C schedule: lr 0.01 halved at epoch 60 of 120, batch 128 "
                 "images, lr x 0.1 on the first two convolutions.")
 ResumeOpt = _opt(bool, "Continue from OUT/last.pt.")
@@ -116,6 +122,13 @@ def train_command(
         _check_data(data)
         if init is not None and not init.is_file():
             raise DataError(f"no checkpoint at {init}. Fix: give a .pt file from handskin train")
+        if arch in CLASSICAL:
+            unused = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction,
+                      "--test-c": test_c or None, "--resume": resume or None,
+                      "--cv-grid": cv_grid}  # fmt: skip
+            _train_classical(arch, data, out, config, seed, _hand_classes(hand_classes), init,
+                             epochs, unused, progress)  # fmt: skip
+            return
         over = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "seed": seed,
                 "val_fraction": val_fraction}  # fmt: skip
         run = resolve_run(arch, config, over, test_c)
@@ -152,7 +165,18 @@ def _train(run, data, out, hand, init, resume, cv_grid, cv_folds, progress) -> N
     typer.echo(f"run written to {out}")
 
 
-CkptsArg = Annotated[list[Path], typer.Argument(help="Checkpoints (.pt files) to evaluate.")]
+def _train_classical(arch, data, out, config, seed, hand, init, epochs, unused, progress) -> None:
+    """BoVW or VGG16 + SVM (``learn.classical.train_checked``): OUT/model.npz and metrics."""
+    from learn.classical import MODEL_FILE, train_checked
+
+    report = train_checked(arch, data, out, config_path=config, seed=seed, hand_classes=hand,
+                           init=init, epochs=epochs, unused=unused, progress=progress)  # fmt: skip
+    typer.echo("test: " + ", ".join(f"{k} {v:.4f}" for k, v in report["test_metrics"].items()))
+    typer.echo(f"model written to {out / MODEL_FILE}")
+
+
+CkptsArg = Annotated[list[Path], typer.Argument(
+    help="Checkpoints (.pt files) or classical models (model.npz from --arch bovw / vgg_svm).")]
 EvalDataOpt = _opt(Path, "Dataset folder or image folder (its test split is used).")
 ReportOpt = _opt(Path, "Markdown report to write (.md file; a .json beside it).")
 ThreadsOpt = _opt(int, "CPU threads used for the timing (count).")
@@ -168,12 +192,13 @@ def evaluate_command(
 ) -> None:
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
     from learn.checkpoint import load_checkpoint, versions
+    from learn.classical import load_npz
     from learn.evaluate import evaluate_checkpoint, write_report
 
     try:
         _check_data(data)
         for c in checkpoints:
-            load_checkpoint(c)
+            load_npz(c) if c.suffix == ".npz" else load_checkpoint(c)
         rows = [evaluate_checkpoint(c, data, hand_classes=_hand_classes(hand_classes),
                                     threads=threads) for c in checkpoints]  # fmt: skip
     except (HandskinError, KeyError) as err:
@@ -187,46 +212,72 @@ def evaluate_command(
 ImageOpt = _opt(Path | None, "A tactile image file (grey PNG/JPG, any size in pixels).")
 FrameOpt = _opt(Path | None, "A taxel frame (.csv row or .npy) of N taxel or C channel values.")
 MapOpt = _opt(Path | None, "For --frame: a dataset folder (its map; values are raw counts, "
-              "converted to Pa) or a layout file (values used as given).", "--map")
+              "converted to Pa) or a layout file (values taken as Pa).", "--map")
+PredDataOpt = _opt(Path | None, "A dataset folder: predict its sample --index (the stored "
+                   "image; raw counts converted to Pa; the ground truth shown when stored).")
+IndexOpt = _opt(int | None, "Sample of --data (count, 0-based).")
 ClfOpt = _opt(Path | None, "Classifier checkpoint (.pt file).")
 SegOpt = _opt(Path | None, "Segmenter checkpoint (.pt file).")
-PngOpt = _opt(Path | None, "Write the picture here (PNG file).")
+PngOpt = _opt(Path | None, "Write the Figs. 12-13 figure here (PNG, 90 dpi: image, truth when "
+              "known, prediction, errors in red) and Fig. 18's per-part bars (kPa, taxel "
+              "count) beside it as <stem>_parts.png.")
+LabelsOpt = _opt(Path | None, "Write the per-taxel predicted class ids here (.npy, (N,) uint8 "
+                 "0..6, no unit) for: handskin view DATASET --sample I --color prediction "
+                 "--pred FILE.npy.")
 StepOpt = _opt(float, "Grid step of the map built from a layout file, mm/pixel.")
+ThresholdOpt = _opt(float | None, "Per-part counts and means take taxels above this pressure, "
+                    "Pa (default: the dataset's active-taxel threshold for --data, else 0).")
 
 
 def predict_command(
     image: ImageOpt = None,
     frame: FrameOpt = None,
     map_: MapOpt = None,
+    data: PredDataOpt = None,
+    index: IndexOpt = None,
     classifier: ClfOpt = None,
     segmenter: SegOpt = None,
     png: PngOpt = None,
+    save_labels: LabelsOpt = None,
     step_mm: StepOpt = 1.0,
+    threshold_pa: ThresholdOpt = None,
 ) -> None:
-    """Class + probability, segmentation, per-part taxel count and mean pressure, a picture."""
+    """Class + probability, segmentation, per-taxel labels, per-part taxel count and mean
+    pressure; the Figs. 12-13 and Fig. 18 pictures; the per-taxel labels for handskin view."""
+    import numpy as np
+
     from learn import predict as P
 
     try:
-        if (image is None) == (frame is None) or (frame is not None and map_ is None):
-            raise ConfigError("give either --image, or --frame with --map")
-        if classifier is None and segmenter is None:
-            raise ConfigError("give --classifier, --segmenter or both")
+        P.check_inputs(image, frame, map_, data, index, classifier, segmenter, save_labels)
+        if threshold_pa is not None and not threshold_pa >= 0:
+            raise ConfigError(f"--threshold-pa {threshold_pa}: give a pressure >= 0 Pa")
+        sample = None if data is None else P.read_sample(data, index)
+        if sample is not None and threshold_pa is not None:
+            sample = dataclasses.replace(sample, threshold_pa=threshold_pa)
         clf = None if classifier is None else P.load_predictor(classifier)
         seg = None if segmenter is None else P.load_predictor(segmenter)
-        pred = _predict(P, image, frame, map_, clf, seg, step_mm)
+        pred = _predict(P, image, frame, map_, sample, clf, seg, step_mm, threshold_pa or 0.0)
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     _echo_prediction(pred)
+    if save_labels is not None:
+        save_labels.parent.mkdir(parents=True, exist_ok=True)
+        np.save(save_labels, pred.taxel_labels.astype(np.uint8))
+        typer.echo(f"per-taxel labels written to {save_labels}")
     if png is not None:
-        P.save_picture(pred, png)
-        typer.echo(f"picture written to {png}")
+        name = "predicted" if seg is None else f"predicted ({segmenter.parent.name or 'model'})"
+        for path in P.save_figures(pred, png, name):
+            typer.echo(f"picture written to {path}")
 
 
-def _predict(P, image, frame, map_, clf, seg, step_mm):
+def _predict(P, image, frame, map_, sample, clf, seg, step_mm, threshold_pa):
+    if sample is not None:
+        return P.predict_sample(sample, clf, seg)
     if image is not None:
         return P.predict_image(P.load_image(image), clf, seg)
     tmap, layout, to_pa = P.load_map(map_, step_mm)
-    return P.predict_frame(to_pa(P.read_frame(frame, layout)), tmap, clf, seg)
+    return P.predict_frame(to_pa(P.read_frame(frame, layout)), tmap, clf, seg, threshold_pa)
 
 
 def _echo_prediction(pred) -> None:

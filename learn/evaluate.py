@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 from torch import nn
 
 from learn import metrics as M
+from learn.experiments import paper
 from learn.models import prepare_for_inference
 
 CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
@@ -186,18 +187,18 @@ def metrics_from_cm(cm: np.ndarray | torch.Tensor) -> dict[str, float]:
 
 #: The paper's Table 3 (hand / non-hand, % accuracy; ms per image). None: not known to us.
 PAPER_TABLE3 = {
-    "HandsNet": (97.81, 12.6),
+    "HandsNet": (paper.HANDSNET_ACCURACY_PCT, paper.HANDSNET_MS_PER_IMAGE),
     "VGG16 + SVM": (None, None),
     "VGG16 fine-tuned": (None, None),
     "BoVW": (None, None),
 }
 #: The paper's Table 8 (segmentation, %: Acc, mAcc, mIoU, fwIoU; ms per image). None: unknown.
 PAPER_TABLE8 = {
-    "SegNet": (93.37, None, 89.17, None, 63.0),
+    "SegNet": (paper.SEGNET_ACC_PCT, None, paper.SEGNET_MIOU_PCT, None, paper.SEGNET_MS_PER_IMAGE),
     "FCN": (None, None, None, None, None),
 }
 ARCH_LABEL = {"handsnet": "HandsNet", "vgg16": "VGG16 fine-tuned", "segnet": "SegNet",
-              "fcn16s": "FCN"}  # fmt: skip
+              "fcn16s": "FCN", "vgg_svm": "VGG16 + SVM", "bovw": "BoVW"}  # fmt: skip
 SEG_KEYS = ("pixel_accuracy", "mean_accuracy", "mean_iou", "fw_iou")
 
 
@@ -205,10 +206,16 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                         hand_classes: tuple[str, ...] | None = None, threads: int = 1,
                         time_runs: int = 100) -> dict:  # fmt: skip
     """Test-split metrics (float and fast path) and CPU ms/image (1 thread by default) of a
-    checkpoint; a JSON-able dict (one row of the report)."""
+    checkpoint (a .pt file; a classical model.npz goes to ``learn.classical.evaluate_classical``);
+    a JSON-able dict (one row of the report)."""
     from learn.checkpoint import load_checkpoint, model_from_checkpoint
     from learn.folder import materialize, open_split
 
+    if Path(ckpt_path).suffix == ".npz":
+        from learn.classical import evaluate_classical
+
+        return evaluate_classical(ckpt_path, data_path, hand_classes=hand_classes,
+                                  threads=threads, time_runs=time_runs)  # fmt: skip
     ckpt = load_checkpoint(ckpt_path)
     model, run = model_from_checkpoint(ckpt)
     hand = hand_classes or (ckpt.get("data") or {}).get("hand_classes")
@@ -231,7 +238,8 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
             "n_test": len(test.y), "cm": ref.cm.tolist(), "metrics": ref.metrics,
             "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
             "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
-            "config": ckpt["config"], "train_versions": ckpt.get("versions")}  # fmt: skip
+            "config": ckpt["config"], "input_size": list(size),
+            "train_versions": ckpt.get("versions")}  # fmt: skip
 
 
 def _fmt(v: float | None, scale: float = 1.0) -> str:
@@ -241,7 +249,7 @@ def _fmt(v: float | None, scale: float = 1.0) -> str:
 def _table3(rows: list[dict]) -> list[str]:
     ours = {ARCH_LABEL.get(r["arch"], r["arch"]): r for r in rows if r["task"] == "classify"}
     out = ["## Hand / non-hand classification (paper: Table 3)", "",
-           "| method | accuracy % (ours) | CPU ms/image (ours, fast path) | accuracy % (paper) "
+           "| method | accuracy % (ours) | CPU ms/image (ours, batch 1) | accuracy % (paper) "
            "| ms/image (paper) |", "|---|---|---|---|---|"]  # fmt: skip
     for name in dict.fromkeys([*PAPER_TABLE3, *ours]):
         r, (p_acc, p_ms) = ours.get(name), PAPER_TABLE3.get(name, (None, None))
@@ -265,17 +273,24 @@ def _table8(rows: list[dict]) -> list[str]:
     return out
 
 
+def _timing(r: dict) -> str:
+    """The sentence on CPU / GPU time per image of a report row."""
+    ms, head = r["ms_per_image"], f"CPU ms/image at batch 1, {r['threads']} thread(s): "
+    if r.get("timing"):  # a classical model: one path, image to label
+        return head + f"{_fmt(ms['fast'])} ({r['timing']})"
+    gpu = "none (no CUDA)" if ms["gpu"] is None else _fmt(ms["gpu"])
+    return (head + f"eval mode {_fmt(ms['eval_mode'])}, prepared (BN folded) "
+            f"{_fmt(ms['prepared'])}, fast path {_fmt(ms['fast'])} "
+            f"(bf16 {'on' if r['bf16'] else 'off'}); GPU {gpu}")  # fmt: skip
+
+
 def _details(r: dict) -> list[str]:
-    ms = r["ms_per_image"]
     names = tuple(r["class_names"]) or tuple(str(i) for i in range(len(r["cm"])))
+    epoch = "" if r["epoch"] is None else f"epoch {r['epoch']}, "
+    size = r.get("input_size") or r["config"]["model"]["input_size"]
     return [f"### {ARCH_LABEL.get(r['arch'], r['arch'])} — `{r['checkpoint']}` "
-            f"(epoch {r['epoch']}, seed {r['seed']}, {r['n_test']} test images)", "",
-            f"CPU ms/image at batch 1, {r['threads']} thread(s): "
-            f"eval mode {_fmt(ms['eval_mode'])}, "
-            f"prepared (BN folded) {_fmt(ms['prepared'])}, fast path {_fmt(ms['fast'])} "
-            f"(bf16 {'on' if r['bf16'] else 'off'}); GPU "
-            f"{'none (no CUDA)' if ms['gpu'] is None else _fmt(ms['gpu'])}; input (h, w) = "
-            f"{tuple(r['config']['model']['input_size'])} px.", "",
+            f"({epoch}seed {r['seed']}, {r['n_test']} test images)", "",
+            f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "",
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
             confusion_markdown(torch.tensor(r["cm"]), names), ""]  # fmt: skip

@@ -1,12 +1,17 @@
-"""Prediction from a tactile image or a taxel frame: hand / non-hand class and probability,
-hand-part segmentation, per-taxel labels back-projected through the map, per-part taxel count
-and mean pressure (the paper's Fig. 18), and a picture: image | segmentation | per-part bars.
+"""Prediction from a dataset sample, a taxel frame or a tactile image: hand / non-hand class and
+probability, hand-part segmentation, per-taxel labels back-projected through the map, per-part
+taxel count and mean pressure (the paper's Fig. 18), and pictures: the Figs. 12–13 prediction
+figure (errors in red when the ground truth is known) and the Fig. 18 per-part bars.
 
     clf, seg = load_predictor("runs/handsnet/best.pt"), load_predictor("runs/segnet/best.pt")
+    pred = predict_sample(read_sample("out/forearm", 12), clf, seg)     # ground truth attached
     tmap, layout, to_pa = load_map("out/forearm")            # a dataset folder or a layout file
     pred = predict_frame(to_pa(read_frame("frame.csv", layout)), tmap, clf, seg)
-    pred.class_name, pred.probability, pred.parts["index"].n_taxels
-    save_picture(pred, "pred.png")
+    pred.class_name, pred.probability, pred.parts["index"].n_taxels, pred.taxel_labels
+    save_figures(pred, "pred.png")                   # pred.png and pred_parts.png
+
+Per-taxel labels follow `tactile.labels.backproject`: a taxel takes the most frequent hand part
+among the segmented pixels within 2 pixels (2 · step_mm) of it on the map, background if none.
 """
 
 from __future__ import annotations
@@ -23,8 +28,8 @@ from learn.checkpoint import load_checkpoint
 from learn.evaluate import fast_inference
 from learn.folder import is_dataset, read_grey
 from tactile.dataset.reader import DatasetReader
-from tactile.errors import DataError
-from tactile.labels import CLASS_NAMES, PALETTE, PartSummary, backproject, colorize, part_summary
+from tactile.errors import ConfigError, DataError
+from tactile.labels import PartSummary, backproject, part_summary
 from tactile.layout import TaxelLayout
 from tactile.resize import resize_image, resize_labels
 from tactile.tactile_map import TactileMap
@@ -65,8 +70,11 @@ class Prediction:
     probability: float | None = None  # its softmax probability, in [0, 1]
     segmentation: np.ndarray | None = None  # (H, W) uint8 classes 0..6 (segmenter given)
     taxel_labels: np.ndarray | None = None  # (N,) uint8 classes (frame and segmenter given)
-    pressure: np.ndarray | None = None  # (N,) float, the frame's pressures (Pa, or its unit)
+    pressure: np.ndarray | None = None  # (N,) float, the frame's pressures, Pa
     parts: dict[str, PartSummary] | None = None  # per hand part: taxels pressed, mean pressure
+    true_segmentation: np.ndarray | None = None  # (H, W) uint8 ground truth (dataset sample)
+    true_labels: np.ndarray | None = None  # (N,) uint8 ground-truth taxel classes (dataset)
+    threshold_pa: float = 0.0  # a taxel counts as pressed in ``parts`` above this pressure, Pa
 
 
 def classify(pred: Prediction, clf: Predictor) -> None:
@@ -97,18 +105,93 @@ def predict_image(image: np.ndarray, clf: Predictor | None = None,
 
 
 def predict_frame(p: np.ndarray, tmap: TactileMap, clf: Predictor | None = None,
-                  seg: Predictor | None = None) -> Prediction:  # fmt: skip
-    """Prediction of a taxel frame ``p`` (N,) pressures through the map: the tactile image,
-    its class / segmentation, per-taxel labels (``backproject``) and ``part_summary``."""
+                  seg: Predictor | None = None,
+                  threshold_pa: float = 0.0) -> Prediction:  # fmt: skip
+    """Prediction of a taxel frame ``p`` (N,) pressures (Pa) through the map: the tactile image,
+    its class / segmentation, per-taxel labels (``backproject``) and ``part_summary`` (taxels
+    above ``threshold_pa``, Pa)."""
     p = np.asarray(p, np.float64)
     if p.shape != (tmap.n_taxels,):
         raise DataError(f"frame has shape {p.shape}; the map has {tmap.n_taxels} taxels")
-    pred = predict_image(tmap.image(p), clf, seg)
-    pred.pressure = p
+    return attach_taxels(predict_image(tmap.image(p), clf, seg), tmap, p, threshold_pa)
+
+
+def attach_taxels(pred: Prediction, tmap: TactileMap, p: np.ndarray,
+                  threshold_pa: float = 0.0) -> Prediction:  # fmt: skip
+    """Fill ``pressure`` (N,) Pa and, with a segmentation, ``taxel_labels`` (back-projected) and
+    ``parts`` (taxels with p > ``threshold_pa`` per predicted part). Returns ``pred``."""
+    pred.pressure, pred.threshold_pa = np.asarray(p, np.float64), float(threshold_pa)
     if pred.segmentation is not None:
         pred.taxel_labels = backproject(tmap, pred.segmentation)
-        pred.parts = part_summary(pred.taxel_labels, p)
+        pred.parts = part_summary(pred.taxel_labels, pred.pressure, threshold=threshold_pa)
     return pred
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One dataset sample as ``predict_sample`` needs it."""
+
+    index: int
+    image: np.ndarray  # (H, W) uint8, the stored tactile image (what the networks were fed)
+    pressure: np.ndarray  # (N,) float64, Pa, from the raw readings (``pressure_from_raw``)
+    tmap: TactileMap
+    true_segmentation: np.ndarray | None  # (H, W) uint8 label image, None when not stored
+    true_labels: np.ndarray | None  # (N,) uint8 taxel classes, None when not stored
+    threshold_pa: float  # the dataset's active-taxel threshold (0 when not recorded), Pa
+
+
+def active_threshold_pa(reader: DatasetReader) -> float:
+    """The pressure above which the dataset's taxels are labelled active (its generation config
+    ``episode.active_pa``; ~3 noise sd), Pa; 0 when not recorded (e.g. a real recording)."""
+    config = reader.attrs.get("config")
+    episode = config.get("episode") if isinstance(config, dict) else None
+    value = episode.get("active_pa", 0.0) if isinstance(episode, dict) else 0.0
+    return float(value) if isinstance(value, int | float) else 0.0
+
+
+def read_sample(path: str | Path, index: int) -> Sample:
+    """Sample ``index`` of the dataset at ``path``; DataError when absent or out of range."""
+    if not is_dataset(path):
+        raise DataError(f"no dataset at {path}. Fix: give a folder holding dataset.h5")
+    with DatasetReader(path) as ds:
+        if not 0 <= index < len(ds):
+            raise DataError(f"--index {index} out of range; {path} has {len(ds)} samples "
+                            f"(0..{len(ds) - 1})")  # fmt: skip
+        truth = [np.asarray(ds[f][index], np.uint8) if f in ds.fields else None
+                 for f in ("label_image", "taxel_label")]  # fmt: skip
+        return Sample(index, np.asarray(ds.image[index], np.uint8),
+                      ds.pressure_from_raw(ds.raw[index]), ds.map, *truth,
+                      active_threshold_pa(ds))  # fmt: skip
+
+
+def predict_sample(sample: Sample, clf: Predictor | None = None,
+                   seg: Predictor | None = None) -> Prediction:  # fmt: skip
+    """Prediction of a dataset sample (its stored image), ground truth attached; parts count
+    the taxels above the dataset's active threshold (``sample.threshold_pa``)."""
+    pred = attach_taxels(predict_image(sample.image, clf, seg), sample.tmap, sample.pressure,
+                         sample.threshold_pa)  # fmt: skip
+    pred.true_segmentation, pred.true_labels = sample.true_segmentation, sample.true_labels
+    return pred
+
+
+def check_inputs(image, frame, map_, data, index, clf, seg, save_labels) -> None:
+    """``handskin predict``'s option combinations (paths or None; ``index`` int or None), checked
+    before any work: ConfigError / DataError naming the option and the fix."""
+    if sum(x is not None for x in (image, frame, data)) != 1 or (frame is not None
+                                                               and map_ is None):  # fmt: skip
+        raise ConfigError("give one input: --image, --frame with --map, or --data with --index")
+    if (data is None) != (index is None):
+        raise ConfigError("--data and --index go together (a dataset and a sample of it)")
+    if clf is None and seg is None:
+        raise ConfigError("give --classifier, --segmenter or both")
+    for path in (clf, seg):
+        if path is not None and not path.is_file():
+            raise DataError(f"no checkpoint at {path}. Fix: give a .pt file from handskin train")
+    if save_labels is not None and (seg is None or image is not None):
+        raise ConfigError("--save-labels needs --segmenter and a map: --frame with --map, or "
+                          "--data with --index (an image alone has no taxels)")
+    if save_labels is not None and save_labels.suffix != ".npy":
+        raise ConfigError(f"--save-labels {save_labels}: give a .npy file name")
 
 
 def read_frame(path: str | Path, layout: TaxelLayout) -> np.ndarray:
@@ -153,34 +236,37 @@ def load_image(path: str | Path) -> np.ndarray:
     return read_grey(path)
 
 
-def save_picture(pred: Prediction, path: str | Path, unit: str = "Pa") -> Path:
-    """PNG: the tactile image | its segmentation | per-part taxel counts (mean pressure noted)."""
-    panels = 1 + (pred.segmentation is not None) + (pred.parts is not None)
-    fig = Figure(figsize=(4.2 * panels, 3.6), layout="constrained")
-    axes = np.atleast_1d(fig.subplots(1, panels))
-    title = "tactile image"
-    if pred.class_name is not None:
-        title += f": {pred.class_name} (p = {pred.probability:.3f})"
-    axes[0].imshow(pred.image, cmap="gray", vmin=0, vmax=255)
-    axes[0].set_title(title)
-    if pred.segmentation is not None:
-        axes[1].imshow(colorize(pred.segmentation))
-        axes[1].set_title("segmentation")
-    if pred.parts is not None:
-        _bars(axes[-1], pred.parts, unit)
-    for ax in axes[: 1 + (pred.segmentation is not None)]:
-        ax.set(xticks=[], yticks=[])
-    fig.savefig(path, dpi=100)
-    return Path(path)
+def save_figures(pred: Prediction, path: str | Path, name: str = "predicted") -> list[Path]:
+    """PNGs (90 dpi): at ``path`` the Figs. 12–13 figure (image | true | predicted | errors in
+    red; image | predicted without ground truth; the image alone without a segmentation), and
+    with per-taxel labels the Fig. 18 bars at ``<stem>_parts.png``. ``name``: the prediction's
+    caption. The classifier's decision is the figure's title."""
+    from tactile.figures import part_bars_figure, prediction_figure, save_figure
+
+    path = Path(path)
+    title = "" if pred.class_name is None else \
+        f"classifier: {pred.class_name} (p = {pred.probability:.3f})"
+    if pred.segmentation is None:
+        fig = _image_figure(pred.image, title)
+    else:
+        fig = prediction_figure(pred.image, pred.true_segmentation, pred.segmentation,
+                                title=title, pred_name=name)  # fmt: skip
+    out = [save_figure(fig, path, dpi=90)]
+    if pred.taxel_labels is not None:
+        bars = part_bars_figure(pred.true_labels, pred.pressure, pred_labels=pred.taxel_labels,
+                                threshold_pa=pred.threshold_pa,
+                                title=f"taxels above {pred.threshold_pa:g} Pa per hand part; "
+                                f"hatched: {name}, back-projected")  # fmt: skip
+        out.append(save_figure(bars, path.with_name(f"{path.stem}_parts.png"), dpi=90))
+    return out
 
 
-def _bars(ax, parts: dict[str, PartSummary], unit: str) -> None:
-    names = list(parts)
-    counts = [parts[n].n_taxels for n in names]
-    colours = PALETTE[[CLASS_NAMES.index(n) for n in names]] / 255.0
-    bars = ax.bar(names, counts, color=colours, edgecolor="k")
-    for bar, n in zip(bars, names, strict=True):
-        ax.annotate(f"{parts[n].mean_pressure:.3g}", (bar.get_x() + bar.get_width() / 2,
-                    bar.get_height()), ha="center", va="bottom", fontsize=8)  # fmt: skip
-    ax.set(ylabel="taxels pressed", title=f"per part (numbers: mean pressure, {unit})")
-    ax.tick_params(axis="x", rotation=45)
+def _image_figure(image: np.ndarray, title: str) -> Figure:
+    """The tactile image (H, W) uint8 alone, ``title`` above (classifier only)."""
+    fig = Figure(figsize=(13 / 4, 1.0 + 13 / 4 * image.shape[0] / image.shape[1]),
+                 layout="constrained")  # fmt: skip
+    ax = fig.subplots()
+    ax.imshow(image, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+    ax.set_title(title or "tactile image", fontsize=9)
+    ax.set_axis_off()
+    return fig

@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 import torch
-from sklearn.pipeline import Pipeline, make_pipeline
-from sklearn.preprocessing import StandardScaler
 from sklearn.svm import LinearSVC
 
+from learn.classical import LinearSvm
 from learn.config import VggSvmConfig
 from learn.models.vgg import VGGClassifier
-from tactile.errors import DataError
+from tactile.config import from_dict
+from tactile.errors import ConfigError, DataError
 
 Images = Sequence[np.ndarray] | np.ndarray | torch.Tensor
 
@@ -51,17 +53,42 @@ def extract_features(
 
 
 class VggSvmClassifier:
-    """A frozen VGG16-style network as feature extractor and a ``LinearSVC`` on its features.
+    """A frozen VGG16-style network as feature extractor and a linear SVM on its features.
 
     ``fit(images, labels)`` / ``predict(images)``; images as in :func:`images_to_tensor`.
-    Features are standardised first when ``cfg.standardize`` (SVMs are scale-sensitive).
+    Features are standardised first when ``cfg.standardize`` (SVMs are scale-sensitive): the
+    mean and scale (D,) are kept as arrays, the SVM as ``learn.classical.LinearSvm``, so that
+    ``to_arrays`` / ``from_arrays`` save and restore the exact model (weights included) without
+    pickle. ``seed`` seeds the LinearSVC solver.
     """
 
-    def __init__(
-        self, model: VGGClassifier, cfg: VggSvmConfig | None = None, device: str = "cpu"
-    ) -> None:
-        self.model, self.cfg, self.device = model, cfg or VggSvmConfig(), device
-        self.svm: Pipeline | None = None
+    def __init__(self, model: VGGClassifier, cfg: VggSvmConfig | None = None,
+                 device: str = "cpu", *, seed: int = 0,
+                 run_config: dict | None = None) -> None:  # fmt: skip
+        self.model, self.cfg, self.device = model.eval(), cfg or VggSvmConfig(), device
+        self.seed, self.run_config = seed, run_config
+        self.mean: np.ndarray | None = None  # (D,) feature mean (0 without standardisation)
+        self.scale: np.ndarray | None = None  # (D,) feature sd (1 where 0 or not standardised)
+        self.svm: LinearSvm | None = None
+
+    @classmethod
+    def from_checkpoint(cls, path: str | Path, cfg: VggSvmConfig | None = None, *,
+                        seed: int = 0) -> VggSvmClassifier:  # fmt: skip
+        """Features of a vgg16 checkpoint written by ``handskin train --arch vgg16``."""
+        from learn.checkpoint import load_checkpoint, model_from_checkpoint
+
+        ckpt = load_checkpoint(path)
+        model, run = model_from_checkpoint(ckpt)
+        if run.model.arch != "vgg16":
+            raise ConfigError(f"{path} is a {run.model.arch} checkpoint; VGG16 + SVM needs a "
+                              "vgg16 one (handskin train --arch vgg16)")  # fmt: skip
+        return cls(model, cfg, seed=seed, run_config=ckpt["config"])
+
+    @property
+    def input_size(self) -> tuple[int, int]:
+        """(h, w) px of the network's input (from its run configuration; else 68 x 100)."""
+        size = ((self.run_config or {}).get("model") or {}).get("input_size", (68, 100))
+        return int(size[0]), int(size[1])
 
     def features(self, images: Images) -> np.ndarray:
         """``(N, D)`` features of the configured layer."""
@@ -69,22 +96,54 @@ class VggSvmClassifier:
             self.model, images, self.cfg.feature_layer, self.cfg.batch_size, self.device
         )
 
+    def _scaled(self, features: np.ndarray) -> np.ndarray:
+        return (np.asarray(features, np.float64) - self.mean) / self.scale
+
     def fit(self, images: Images, labels: np.ndarray) -> VggSvmClassifier:
         """Extract features and fit the SVM; returns ``self``."""
-        steps = [StandardScaler()] if self.cfg.standardize else []
-        self.svm = make_pipeline(*steps, LinearSVC(C=self.cfg.svm_c, random_state=0))
-        self.svm.fit(self.features(images), np.asarray(labels))
+        feats = np.asarray(self.features(images), np.float64)
+        self.mean, self.scale = np.zeros(feats.shape[1]), np.ones(feats.shape[1])
+        if self.cfg.standardize:
+            sd = feats.std(axis=0)
+            self.mean, self.scale = feats.mean(axis=0), np.where(sd > 0, sd, 1.0)
+        svc = LinearSVC(C=self.cfg.svm_c, random_state=self.seed)
+        self.svm = LinearSvm.from_sklearn(svc.fit(self._scaled(feats), np.asarray(labels)))
         return self
 
-    def _fitted(self) -> Pipeline:
+    def _fitted(self) -> LinearSvm:
         if self.svm is None:
             raise DataError("VggSvmClassifier: call fit() before predict()")
         return self.svm
 
     def decision_function(self, images: Images) -> np.ndarray:
         """SVM scores: ``(N,)`` for two classes, ``(N, C)`` otherwise."""
-        return self._fitted().decision_function(self.features(images))
+        return self._fitted().decision_function(self._scaled(self.features(images)))
 
     def predict(self, images: Images) -> np.ndarray:
         """``(N,)`` predicted labels."""
-        return self._fitted().predict(self.features(images))
+        return self._fitted().predict(self._scaled(self.features(images)))
+
+    def to_arrays(self) -> tuple[dict, dict[str, np.ndarray]]:
+        """(configuration: VggSvmConfig fields and the network's run config; arrays: the SVM,
+        ``mean`` / ``scale`` (D,) and the network's weights as ``vgg.<state-dict name>``)."""
+        svm = self._fitted()
+        weights = {f"vgg.{k}": v.detach().cpu().numpy() for k, v in self.model.state_dict().items()}
+        cfg = {**asdict(self.cfg), "seed": self.seed, "vgg_run": self.run_config}
+        return cfg, {"mean": self.mean, "scale": self.scale, **svm.arrays(), **weights}
+
+    @classmethod
+    def from_arrays(cls, meta: dict, arrays: dict[str, np.ndarray]) -> VggSvmClassifier:
+        """The model :meth:`to_arrays` described (network rebuilt from its run config)."""
+        from learn.models import create_model
+        from learn.train import run_from_dict
+
+        cfg = dict(meta["config"])
+        seed, run_config = cfg.pop("seed"), cfg.pop("vgg_run")
+        run = run_from_dict(run_config)
+        model = create_model(run.model.arch, **run.model.kwargs())
+        model.load_state_dict({k[4:]: torch.from_numpy(np.array(v)) for k, v in arrays.items()
+                               if k.startswith("vgg.")})  # fmt: skip
+        out = cls(model, from_dict(VggSvmConfig, cfg), seed=seed, run_config=run_config)
+        out.mean, out.scale = arrays["mean"], arrays["scale"]
+        out.svm = LinearSvm.from_arrays(arrays)
+        return out

@@ -29,18 +29,18 @@ stiffens like fingertip pulp (Serina et al., J Biomech 1997) and the depth stays
 ``w`` is per segment, `TISSUE_RATIO` x ``tissue_depth_m``: the rigid primitives stand for bone
 plus soft tissue that flattens on a surface, and a deeper allowance lets them overlap the link as
 far as the real tissue would spread. Anatomy (approximate, rounded): fingertip pulp 3-5 mm from
-the distal phalanx to the skin and a contact patch of 1.5-2.5 cm^2 (about 14-18 mm across) at
-1-5 N (Serina et al. 1997; Pawluk & Howe, J Biomech Eng 1999); the palm's fat pad, palmar
-aponeurosis and intrinsic muscles put roughly 8-15 mm of soft tissue under the metacarpals and
-more under the thenar/hypothenar eminences; the phalanx pads carry a fibro-fatty pad a few
-millimetres thick. Since the solver's depth is only a fraction of ``w`` at moderate forces
-(measured on the forearm: fingertips 2-4 mm, palm 3-6 mm at 10-40 N), the allowances are set at
-about twice the anatomical thickness of each region, and the palm's above the fingertip's. Measured
-(320 forearm samples, seed 2020, forces of `sim.interactions`): median active taxels per hand
-contact 16 with one 3.5 mm allowance everywhere, 23 with the palm at 2.5x, 43 with
-`TISSUE_RATIO`; the palm's share of hand pixels stays 0.51 (paper ~0.40). On MuJoCo's tactile
-plate an index fingertip pressed with 2-5 N now sinks 4-6 mm and touches 12-20 mm across (the
-chord of its capsule end; tests/sim/test_hand.py), as fingerpads do (before: 10-13.5 mm).
+the distal phalanx to the skin; the palm's fat pad, palmar aponeurosis and intrinsic muscles put
+roughly 8-15 mm of soft tissue under the metacarpals and more under the thenar/hypothenar
+eminences; the phalanx pads carry a fibro-fatty pad a few millimetres thick over a finger 16-20
+mm wide. The solver's depth is only a fraction of ``w`` at moderate forces, so ``w`` is tuned per
+segment to what a contact must look like, and measured: the pulp's allowance (1.25 x) makes a
+fingertip pressed with 2-5 N on MuJoCo's tactile plate sink 2.5-3 mm and touch 11-14 mm across
+for hands of 15-22 cm (the chord of its capsule end; a pressed finger pad touches about 10-15 mm
+across; tests/sim/test_hand.py); the phalanx pads (5 x) flatten across the finger's width, so a
+finger lying on the link prints a stripe; the palm takes 2.75 x. Measured
+(320 forearm samples, seed 2020, forces of `sim.interactions`): median 42 active taxels per hand
+contact (quartiles 30 / 55), palm 0.51 of hand pixels (paper ~0.40), thumb 0.03, >= 3 fingers in
+88 % of grasps. History: one 3.5 mm allowance everywhere gave a median of 16 active taxels.
 
 Labels. Collision geoms are named ``<prefix><part>_<segment>`` with part in `HAND_PARTS`
 (the thenar eminence on the first metacarpal is "palm"); `geom_parts` / `geom_part_ids` recover
@@ -87,9 +87,9 @@ PART_RGBA = {  # after the palette of Albini & Cannata 2020, Fig. 10
     "pinkie": (0.60, 0.35, 0.80, 1.0), "palm": (0.90, 0.75, 0.65, 1.0),
 }
 # Soft-tissue allowance (solimp width) per segment, as a multiple of the subject's softness scale
-# `HandConfig.tissue_depth_m` (3.5 mm mean): palm 10.5 mm, phalanx pads 10.5 mm, fingertip pulp
-# 8.75 mm at the mean (module docstring, "Soft tissue"; measured effect in test_hand_statistics).
-TISSUE_RATIO = {"palm": 3.0, "proximal": 3.0, "middle": 3.0, "distal": 2.5}
+# `HandConfig.tissue_depth_m` (3.5 mm mean): palm 9.6 mm, phalanx pads 17.5 mm, fingertip pulp
+# 4.4 mm at the mean (module docstring, "Soft tissue"; measured effect in test_hand_statistics).
+TISSUE_RATIO = {"palm": 2.75, "proximal": 5.0, "middle": 5.0, "distal": 1.25}
 _PART_RE = re.compile(r"(?:^|_)[rl]h_(thumb|index|middle|ring|pinkie|palm)_")
 
 

@@ -31,10 +31,18 @@ def has_display() -> bool:
 
 def load_predicted(path: Path, tmap, n_taxels: int) -> tuple[np.ndarray, np.ndarray | None]:
     """(per-taxel classes (N,), pixel segmentation (H, W) or None) from a .npy of (N,) taxel
-    labels or of an (H, W) segmentation (back-projected with `tactile.labels.backproject`)."""
+    labels (as ``handskin predict --save-labels`` writes) or of an (H, W) segmentation
+    (back-projected with `tactile.labels.backproject`)."""
     from tactile.labels import backproject, check_labels
 
-    arr = np.load(path)
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"no predicted labels at {path}. Fix: write them with handskin predict "
+                        "--data DATASET --index I --segmenter CKPT --save-labels FILE.npy")
+    try:
+        arr = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as err:
+        raise DataError(f"{path}: not a .npy array of class ids ({err})") from err
     if arr.shape == tmap.shape:
         return backproject(tmap, arr.astype(np.int64)).astype(np.int64), arr.astype(np.int64)
     if arr.shape == (n_taxels,):
@@ -99,7 +107,11 @@ def write_outputs(scene, tmap, sample, seq, opts: dict) -> list[Path]:
     if scene is not None and (opts["png"] or opts["panel"] or opts["interactive"]):
         view = render_scene(scene, opts["color"], predicted, size_px=opts["size_px"],
                             interactive=opts["interactive"])
-    if opts["png"] and view is not None:
+    if opts["png"] and view is None:
+        raise DataError("no 3D scene for this sample: the dataset is not a synthetic one whose "
+                        "configuration can be re-simulated. Fix: write --panel or "
+                        "--prediction-png instead of --png")
+    if opts["png"]:
         opts["png"].parent.mkdir(parents=True, exist_ok=True)
         Image.fromarray(view).save(opts["png"])
         out.append(opts["png"])
@@ -128,7 +140,8 @@ def prediction_outputs(tmap, sample: dict, predicted, pred_pixels, png: Path,
     from tactile.figures import part_bars_figure, prediction_figure, save_figure
 
     if pred_pixels is None:
-        raise DataError("--prediction-png needs --pred as an (H, W) pixel segmentation")
+        raise DataError("--prediction-png needs --pred as an (H, W) pixel segmentation; for "
+                        "(N,) taxel labels, handskin predict --png draws these figures")
     pressure = np.asarray(sample["pressure_pa"], dtype=float)
     fig = prediction_figure(sample["image"], sample["label_image"], pred_pixels, pred_name=name)
     bars = part_bars_figure(sample["taxel_label"], pressure, pred_labels=predicted,

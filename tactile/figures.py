@@ -201,62 +201,72 @@ def error_picture(image: np.ndarray, true: np.ndarray, pred: np.ndarray) -> np.n
 
 
 def prediction_figure(
-    image: np.ndarray, true: np.ndarray, pred: np.ndarray, *, title: str = "",
+    image: np.ndarray, true: np.ndarray | None, pred: np.ndarray, *, title: str = "",
     pred_name: str = "predicted",
 ) -> Figure:
     """Original image | true labels | predicted segmentation | errors in red (Figs. 12–13).
 
-    image : (H, W) uint8. true, pred : (H, W) int classes 0..6. The error panel's title gives the
-    pixel accuracy over the tactile image's foreground (image > 0 or either label > 0).
+    image : (H, W) uint8. true : (H, W) int classes 0..6, or None when the ground truth is
+    unknown (then only image | predicted). pred : (H, W) int classes 0..6. The error panel's
+    title gives the pixel accuracy over the tactile image's foreground (image > 0 or either
+    label > 0). Panels are 13/4 inches wide each.
     """
-    image, true, pred = np.asarray(image), np.asarray(true), np.asarray(pred)
-    if not image.shape == true.shape == pred.shape:
-        raise MapError(f"image {image.shape}, true {true.shape} and pred {pred.shape} differ")
-    fg = (image > 0) | (true > 0) | (pred > 0)
-    acc = float((true[fg] == pred[fg]).mean()) if fg.any() else 1.0
-    fig = Figure(figsize=(13, 1.0 + 13 / 4 * image.shape[0] / image.shape[1]),
+    image, pred = np.asarray(image), np.asarray(pred)
+    if image.shape != pred.shape or (true is not None and np.shape(true) != image.shape):
+        raise MapError(f"image {image.shape}, true {np.shape(true) if true is not None else None}"
+                       f" and pred {pred.shape} differ")
+    n = 2 if true is None else 4
+    fig = Figure(figsize=(13 / 4 * n, 1.0 + 13 / 4 * image.shape[0] / image.shape[1]),
                  layout="constrained")
-    axes = fig.subplots(1, 4)
+    axes = fig.subplots(1, n)
     _show(axes[0], image, "tactile image")
-    _show(axes[1], overlay(image, true), "true labels")
-    _show(axes[2], overlay(image, pred), pred_name)
-    _show(axes[3], error_picture(image, true, pred), f"errors (red), accuracy {100 * acc:.1f} %")
-    palette_legend(fig)
+    _show(axes[1 if true is None else 2], overlay(image, pred), pred_name)
+    if true is not None:
+        true = np.asarray(true)
+        fg = (image > 0) | (true > 0) | (pred > 0)
+        acc = float((true[fg] == pred[fg]).mean()) if fg.any() else 1.0
+        _show(axes[1], overlay(image, true), "true labels")
+        _show(axes[3], error_picture(image, true, pred),
+              f"errors (red), accuracy {100 * acc:.1f} %")
+    palette_legend(fig, ncols=6 if n == 4 else 3)
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
 
 
 def part_bars_figure(
-    labels: np.ndarray, pressure_pa: np.ndarray, *, pred_labels: np.ndarray | None = None,
+    labels: np.ndarray | None, pressure_pa: np.ndarray, *, pred_labels: np.ndarray | None = None,
     threshold_pa: float = 0.0, title: str = "",
 ) -> Figure:
     """Per hand part: mean pressure (kPa) and pressed taxel count, bars in PALETTE (Fig. 18).
 
     labels, pred_labels : (N,) int per-taxel classes 0..6 (true / predicted, e.g. back-projected
-    with `tactile.labels.backproject`). pressure_pa : (N,) float, Pa. threshold_pa : a taxel counts
-    when its pressure exceeds it, Pa. With ``pred_labels``, hatched bars show the prediction.
+    with `tactile.labels.backproject`); either may be None, not both. pressure_pa : (N,) float,
+    Pa. threshold_pa : a taxel counts when its pressure exceeds it, Pa. Predicted bars are
+    hatched; with both series, a legend tells them apart.
     """
-    series = [("true", labels)] + ([("predicted", pred_labels)] if pred_labels is not None else [])
+    series = [(name, lab, k) for k, (name, lab) in
+              enumerate((("true", labels), ("predicted", pred_labels))) if lab is not None]
+    if not series:
+        raise MapError("part_bars_figure needs true labels, predicted labels or both")
     names = CLASS_NAMES[1:]
     x, width = np.arange(len(names)), 0.8 / len(series)
     fig = Figure(figsize=(10, 3.6), layout="constrained")
     ax_p, ax_n = fig.subplots(1, 2)
-    for k, (name, lab) in enumerate(series):
+    for j, (name, lab, hatched) in enumerate(series):
         summary = part_summary(lab, pressure_pa, threshold=threshold_pa)
         kw = {"color": PALETTE[1:] / 255.0, "edgecolor": "k", "linewidth": 0.5,
-              "hatch": "//" if k else None, "label": name}
-        offset = x + (k - (len(series) - 1) / 2) * width
+              "hatch": "//" if hatched else None, "label": name}
+        offset = x + (j - (len(series) - 1) / 2) * width
         ax_p.bar(offset, [summary[n].mean_pressure / 1e3 for n in names], width, **kw)
         ax_n.bar(offset, [summary[n].n_taxels for n in names], width, **kw)
     for ax, label in ((ax_p, "mean pressure (kPa)"), (ax_n, "pressed taxels (count)")):
         ax.set_xticks(x, names, fontsize=8)
+        ax.set_xlabel("hand part")
         ax.set_ylabel(label)
         ax.grid(axis="y", alpha=0.3)
-        if len(series) > 1:
-            ax.legend(handles=[Patch(facecolor="w", edgecolor="k", label="true"),
-                               Patch(facecolor="w", edgecolor="k", hatch="//",
-                                     label="predicted")], fontsize=8)
+        ax.legend(handles=[Patch(facecolor="w", edgecolor="k", hatch="//" if h else None,
+                                 label=name) for name, _, h in series], fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
     return fig

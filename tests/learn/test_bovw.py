@@ -1,13 +1,30 @@
-"""Bag of visual words: descriptors' layout, blank-image fallback, and a tiny problem it solves."""
+"""Bag of visual words: descriptors' layout, blank-image fallback, a tiny problem it solves;
+the arrays that replace sklearn's objects against sklearn / a distance table; `handskin train
+--arch bovw` → model.npz → load → `handskin evaluate` (Table 3's BoVW row) on the tiny dataset."""
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
+import typer
+from scipy.spatial.distance import cdist
 from skimage.draw import disk, line_aa
+from sklearn.svm import LinearSVC
+from typer.testing import CliRunner
 
-from learn.bovw import BagOfVisualWords, dense_descriptors, image_descriptors, word_histogram
+from learn.bovw import (
+    BagOfVisualWords,
+    dense_descriptors,
+    image_descriptors,
+    nearest_words,
+    word_histogram,
+)
+from learn.classical import MODEL_FILE, LinearSvm, confusion, load_classical, split_images
+from learn.cli import register
 from learn.config import BovwConfig
+from tactile.dataset import open_dataset
 from tactile.errors import ConfigError, DataError
 
 
@@ -81,3 +98,100 @@ def test_errors():
         BagOfVisualWords(BovwConfig(vocabulary_size=500)).fit([np.zeros((16, 16))] * 2, [0, 1])
     with pytest.raises(DataError, match="fit"):
         BagOfVisualWords().predict([np.zeros((16, 16))])
+
+
+def test_nearest_words_match_a_distance_table():
+    rng = np.random.default_rng(3)
+    desc, vocabulary = rng.random((200, 128)), rng.random((17, 128))
+    expected = cdist(desc, vocabulary).argmin(axis=1)
+    assert np.array_equal(nearest_words(desc, vocabulary), expected)
+
+
+@pytest.mark.parametrize("n_classes", [2, 3])
+def test_linear_svm_arrays_match_sklearn(n_classes):
+    rng = np.random.default_rng(n_classes)
+    x, y = rng.normal(size=(90, 5)), np.arange(90) % n_classes + 4  # ids need not start at 0
+    x[:, 0] += 2.0 * y
+    svc = LinearSVC(random_state=0).fit(x, y)
+    svm = LinearSvm.from_sklearn(svc)
+    np.testing.assert_allclose(svm.decision_function(x), svc.decision_function(x), atol=1e-10)
+    assert np.array_equal(svm.predict(x), svc.predict(x))
+
+
+TINY_BOVW = 'input_size = [32, 48]\nvocabulary_size = 20\n'  # small images, few words: fast
+
+
+@pytest.fixture(scope="module")
+def bovw_run(tiny_dataset, tmp_path_factory):
+    """`handskin train --arch bovw` on the tiny dataset: the run folder."""
+    folder = tmp_path_factory.mktemp("bovw")
+    (folder / "bovw.toml").write_text(TINY_BOVW)
+    app = typer.Typer()
+    register(app)
+    res = CliRunner().invoke(app, ["train", str(tiny_dataset), "--out", str(folder / "run"),
+                                   "--arch", "bovw", "--config", str(folder / "bovw.toml"),
+                                   "--seed", "2", "--no-progress"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    return folder / "run"
+
+
+def test_bovw_train_save_load_gives_the_fitted_model(bovw_run, tiny_dataset):
+    loaded = load_classical(bovw_run / MODEL_FILE)
+    assert loaded.meta["kind"] == "bovw" and loaded.meta["seed"] == 2
+    assert loaded.cfg == BovwConfig(vocabulary_size=20, seed=2)
+    x, y, _ = split_images(tiny_dataset, "train", (32, 48))
+    fresh = BagOfVisualWords(BovwConfig(vocabulary_size=20, seed=2)).fit(x, y)  # same seed
+    test_x, test_y, names = split_images(tiny_dataset, "test", (32, 48))
+    assert names == ("non_hand", "hand")
+    np.testing.assert_array_equal(loaded.predict(test_x), fresh.predict(test_x))
+    np.testing.assert_allclose(loaded.decision_function(test_x), fresh.decision_function(test_x))
+    report = json.loads((bovw_run / "test_metrics.json").read_text())
+    pred = loaded.predict(test_x)
+    assert report["test_confusion"] == confusion(test_y, pred, 2).tolist()
+    assert report["test_metrics"]["accuracy"] == pytest.approx((pred == test_y).mean())
+
+
+def test_evaluate_fills_the_bovw_row(bovw_run, tiny_dataset, tmp_path):
+    app = typer.Typer()
+    register(app)
+    md = tmp_path / "report.md"
+    res = CliRunner().invoke(app, ["evaluate", str(bovw_run / MODEL_FILE), "--data",
+                                   str(tiny_dataset), "--report", str(md)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    (row,) = json.loads(md.with_suffix(".json").read_text())
+    ds = open_dataset(tiny_dataset)
+    is_hand = ds.is_hand[:][ds.splits["test"]]
+    assert np.array(row["cm"]).sum(axis=1).tolist() == np.bincount(is_hand, minlength=2).tolist()
+    test_x, test_y, _ = split_images(tiny_dataset, "test", (32, 48), seed=2)
+    accuracy = (load_classical(bovw_run / MODEL_FILE).predict(test_x) == test_y).mean()
+    assert row["metrics"]["accuracy"] == pytest.approx(accuracy) and row["ms_per_image"]["fast"] > 0
+    text = md.read_text()
+    assert f"| BoVW | {100 * accuracy:.2f} | {row['ms_per_image']['fast']:.2f} |" in text
+    assert "| VGG16 + SVM | not run |" in text and "descriptors, visual words, SVM" in text
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--lr", "0.1"], "--lr does not apply to --arch bovw"),
+        (["--epochs", "3"], "apply to --arch vgg_svm only"),
+        (["--config", "{bad}"], "unknown key 'vocab'"),
+    ],
+)
+def test_bovw_option_errors_before_work(tiny_dataset, tmp_path, extra, message):
+    (tmp_path / "bad.toml").write_text("vocab = 3\n")
+    app = typer.Typer()
+    register(app)
+    args = ["train", str(tiny_dataset), "--out", str(tmp_path / "out"), "--arch", "bovw",
+            *[a.format(bad=tmp_path / "bad.toml") for a in extra]]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2 and message in res.output, res.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_model_file_errors(tmp_path):
+    with pytest.raises(DataError, match="no model file"):
+        load_classical(tmp_path / "none.npz")
+    np.savez(tmp_path / "other.npz", a=np.zeros(3))
+    with pytest.raises(DataError, match="not a handskin classical model"):
+        load_classical(tmp_path / "other.npz")

@@ -1,12 +1,25 @@
 """Evaluation: metrics of a known prediction against hand computations, the fast inference path
-keeps predictions, checkpoint evaluation and the markdown report beside the paper."""
+keeps predictions, checkpoint evaluation and the markdown report beside the paper, VGG16 + SVM
+trained from a vgg16 checkpoint, saved, loaded and reported in Table 3's row."""
 
 from __future__ import annotations
 
+import json
+
+import numpy as np
 import pytest
 import torch
 from torch import nn
 
+from learn.classical import (
+    MODEL_FILE,
+    confusion,
+    evaluate_classical,
+    load_classical,
+    split_images,
+    train_classical,
+)
+from learn.config import VggSvmConfig
 from learn.evaluate import (
     confusion_markdown,
     evaluate_checkpoint,
@@ -15,8 +28,12 @@ from learn.evaluate import (
     plot_history,
     write_report,
 )
+from learn.experiments import paper
 from learn.folder import TensorData
 from learn.models import create_model
+from learn.train import fit, load_data
+from learn.vgg_svm import VggSvmClassifier
+from tactile.errors import ConfigError
 
 
 class Oracle(nn.Module):
@@ -76,7 +93,9 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     assert sum(map(sum, clf["cm"])) == 16 and clf["ms_per_image"]["fast"] > 0
     assert abs(clf["fast_metrics"]["accuracy"] - clf["metrics"]["accuracy"]) <= 0.005
     text = write_report(rows, tmp_path / "report.md", "tiny").read_text()
-    for needle in ("paper", "97.81", "12.60", "93.37", "89.17", "63.00", "unknown", "not run",
+    known = (paper.HANDSNET_ACCURACY_PCT, paper.HANDSNET_MS_PER_IMAGE, paper.SEGNET_ACC_PCT,
+             paper.SEGNET_MIOU_PCT, paper.SEGNET_MS_PER_IMAGE)
+    for needle in ("paper", *(f"{v:.2f}" for v in known), "unknown", "not run",
                    f"{100 * clf['metrics']['accuracy']:.2f}", "% of each true class"):
         assert needle in text, needle
 
@@ -85,3 +104,42 @@ def test_plot_history(tmp_path):
     hist = [{"epoch": 1, "train_loss": 1.0, "val_loss": 0.9, "val_metric": 0.6},
             {"epoch": 2, "train_loss": 0.5, "val_loss": 0.7, "val_metric": 0.8}]  # fmt: skip
     assert plot_history(hist, tmp_path / "c.png").stat().st_size > 1000
+
+
+@pytest.fixture(scope="module")
+def vgg16_checkpoint(tiny_dataset, tiny_run, tmp_path_factory):
+    """A width-0.125 vgg16 trained one epoch on the tiny dataset."""
+    torch.set_num_threads(1)
+    run = tiny_run("vgg16", epochs=1)
+    folder = tmp_path_factory.mktemp("vgg16")
+    fit(run, load_data(tiny_dataset, run), folder, progress=False)
+    return folder / "best.pt"
+
+
+def test_vgg_svm_train_save_load_evaluate(vgg16_checkpoint, checkpoints, tiny_dataset, tmp_path):
+    out = tmp_path / "vgg_svm"
+    report = train_classical("vgg_svm", tiny_dataset, out, seed=1, init=vgg16_checkpoint,
+                             progress=False)  # fmt: skip
+    loaded = load_classical(out / MODEL_FILE)
+    assert loaded.input_size == (32, 48) and loaded.seed == 1
+    fresh = VggSvmClassifier.from_checkpoint(vgg16_checkpoint, VggSvmConfig(), seed=1)
+    fresh.fit(*split_images(tiny_dataset, "train", (32, 48))[:2])
+    x, y, _ = split_images(tiny_dataset, "test", (32, 48))
+    np.testing.assert_array_equal(loaded.predict(x), fresh.predict(x))
+    np.testing.assert_allclose(loaded.decision_function(x), fresh.decision_function(x),
+                               rtol=1e-6, atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(loaded.features(x), fresh.features(x))  # the weights came back
+    row = evaluate_classical(out / MODEL_FILE, tiny_dataset, time_runs=3)
+    assert row["cm"] == report["test_confusion"] == confusion(y, fresh.predict(x), 2).tolist()
+    rows = [row, evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3)]
+    text = write_report(rows, tmp_path / "r.md").read_text()
+    acc = 100 * float((fresh.predict(x) == y).mean())
+    assert f"| VGG16 + SVM | {acc:.2f} | {row['ms_per_image']['fast']:.2f} | unknown |" in text
+    assert "| HandsNet | " in text and "| BoVW | not run |" in text
+    assert json.loads((out / "test_metrics.json").read_text())["seed"] == 1
+
+
+def test_vgg_svm_needs_a_vgg16_checkpoint(checkpoints, tiny_dataset, tmp_path):
+    with pytest.raises(ConfigError, match="needs a vgg16 one"):
+        train_classical("vgg_svm", tiny_dataset, tmp_path, init=checkpoints["handsnet"])
+    assert not (tmp_path / MODEL_FILE).exists()

@@ -1,24 +1,36 @@
-"""Prediction from a taxel frame or an image: class and probability, segmentation, per-taxel
-labels and per-part summaries consistent with tactile.labels, the picture, input errors."""
+"""Prediction from a dataset sample, a taxel frame or an image: class and probability,
+segmentation, per-taxel labels (checked against a slow reference of the back-projection rule and
+the dataset's own labels) and per-part summaries, the figures, `handskin predict` end to end and
+its hand-off to `handskin view`, input errors."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import torch
+import typer
+from PIL import Image
+from typer.testing import CliRunner
 
+from learn.cli import register
 from learn.predict import (
+    Prediction,
     Predictor,
+    attach_taxels,
     load_map,
     load_predictor,
     predict_frame,
     predict_image,
+    predict_sample,
     read_frame,
-    save_picture,
+    read_sample,
+    save_figures,
 )
-from tactile.dataset import open_dataset
+from sim.view_cli import load_predicted
+from tactile.dataset import DatasetWriter, open_dataset
 from tactile.errors import DataError
-from tactile.labels import backproject, part_summary
+from tactile.labels import N_CLASSES, backproject, part_summary
+from tactile.tactile_map import TactileMap
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +51,10 @@ def test_predict_frame_parts_match_part_summary(predictors, tiny_dataset, tmp_pa
     assert np.array_equal(pred.taxel_labels, backproject(tmap, pred.segmentation))
     assert pred.parts == part_summary(pred.taxel_labels, p)
     assert (pred.segmentation[tmap.image(p) == 0] == 0).all()
-    assert save_picture(pred, tmp_path / "pred.png").stat().st_size > 1000
+    fig, bars = save_figures(pred, tmp_path / "pred.png")
+    assert bars.name == "pred_parts.png"
+    assert_picture(fig, (90 * (1.0 + 13 / 4 * tmap.shape[0] / tmap.shape[1]), 90 * 13 / 2))
+    assert_picture(bars, (90 * 3.6, 90 * 10))
 
 
 class Stripes(torch.nn.Module):
@@ -59,6 +74,10 @@ def test_parts_with_a_known_segmenter(tiny_dataset):
     assert pred.parts == part_summary(backproject(tmap, pred.segmentation), p)
     assert sum(s.n_taxels for s in pred.parts.values()) >= (p > 0).sum() // 2
     assert len({s.n_taxels for s in pred.parts.values()}) > 1
+    middle = float(np.median(p[p > 0]))
+    above = predict_frame(p, tmap, None, seg, threshold_pa=middle)
+    assert above.parts == part_summary(pred.taxel_labels, p, threshold=middle) != pred.parts
+    assert np.array_equal(above.taxel_labels, pred.taxel_labels)  # labels do not depend on it
 
 
 def test_predict_image_and_layout_map(predictors, tiny_dataset, tmp_path):
@@ -80,3 +99,134 @@ def test_read_frame_errors(tiny_dataset, tmp_path):
         read_frame(tmp_path / "short.npy", layout)
     with pytest.raises(DataError, match="no frame file"):
         read_frame(tmp_path / "missing.csv", layout)
+
+
+def assert_picture(path, size_px) -> None:
+    """A PNG of (height, width) ``size_px`` (±1 px) whose pixels vary."""
+    rgb = np.asarray(Image.open(path).convert("RGB"))
+    assert abs(rgb.shape[0] - size_px[0]) <= 1 and abs(rgb.shape[1] - size_px[1]) <= 1
+    assert rgb.std() > 10 and np.mean(np.any(rgb != rgb[0, 0], axis=-1)) > 0.05
+
+
+def slow_backproject(tmap: TactileMap, seg: np.ndarray, radius_mm: float) -> np.ndarray:
+    """The documented rule, taxel by taxel: the most frequent class 1..6 among the pixels whose
+    centre lies within ``radius_mm`` of one of the taxel's map vertices; ties to the smaller id;
+    0 when there is none."""
+    centres = tmap.pixel_centers().reshape(-1, 2)
+    flat = seg.reshape(-1)
+    out = np.zeros(tmap.n_taxels, np.uint8)
+    for t in range(tmap.n_taxels):
+        near = np.zeros(len(flat), bool)
+        for uv in tmap.vertex_uv_mm[tmap.vertex_taxel == t]:
+            near |= np.hypot(*(centres - uv).T) <= radius_mm
+        counts = np.bincount(flat[near], minlength=N_CLASSES)[1:]
+        out[t] = counts.argmax() + 1 if counts.any() else 0
+    return out
+
+
+def test_ground_truth_segmentation_backprojects_to_the_dataset_labels(tiny_dataset):
+    ds = open_dataset(tiny_dataset)
+    hands = np.flatnonzero(ds.is_hand[:])[:3]
+    for i in hands:
+        sample = read_sample(tiny_dataset, int(i))
+        pred = attach_taxels(Prediction(sample.image, segmentation=sample.true_segmentation),
+                             sample.tmap, sample.pressure)
+        reference = slow_backproject(sample.tmap, sample.true_segmentation,
+                                     2 * sample.tmap.step_mm)
+        assert np.array_equal(pred.taxel_labels, reference)
+        active = sample.pressure > 0
+        assert np.array_equal(active, sample.true_labels > 0)  # hand samples: pressed = labelled
+        assert (pred.taxel_labels[active] > 0).all()  # every pressed taxel lies under the image
+        # the label image gives a pixel the part with the largest pressure there, so a finger
+        # taxel beside the (harder pressed) palm may be read as palm; all others agree
+        agree = pred.taxel_labels[active] == sample.true_labels[active]
+        assert agree.mean() >= 0.95
+        assert set(pred.taxel_labels[active][~agree]) <= {6}
+
+
+def test_read_sample_errors(tiny_dataset, tmp_path):
+    with pytest.raises(DataError, match="out of range"):
+        read_sample(tiny_dataset, 48)
+    with pytest.raises(DataError, match="no dataset"):
+        read_sample(tmp_path, 0)
+
+
+def test_predict_command_end_to_end_and_view_hand_off(checkpoints, tiny_dataset, tmp_path):
+    app = typer.Typer()
+    register(app)
+    png, labels = tmp_path / "fig" / "pred.png", tmp_path / "pred33.npy"
+    args = ["predict", "--data", str(tiny_dataset), "--index", "3", "--classifier",
+            str(checkpoints["handsnet"]), "--segmenter", str(checkpoints["segnet"]), "--png",
+            str(png), "--save-labels", str(labels)]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    sample = read_sample(tiny_dataset, 3)
+    expected = predict_sample(sample, None, load_predictor(checkpoints["segnet"]))
+    saved = np.load(labels)
+    assert saved.dtype == np.uint8 and np.array_equal(saved, expected.taxel_labels)
+    assert np.array_equal(saved, backproject(sample.tmap, expected.segmentation))
+    assert sample.threshold_pa == 0.0  # the tiny dataset records no active threshold
+    for name, s in part_summary(saved, sample.pressure).items():
+        assert f"{name:7s} {s.n_taxels:5d} taxels" in res.output
+    tmap = sample.tmap
+    assert_picture(png, (90 * (1.0 + 13 / 4 * tmap.shape[0] / tmap.shape[1]), 90 * 13))
+    assert_picture(png.with_name("pred_parts.png"), (90 * 3.6, 90 * 10))
+    red = np.all(np.asarray(Image.open(png).convert("RGB")) == (255, 0, 0), axis=-1)
+    wrong = (expected.segmentation != sample.true_segmentation).any()
+    assert red.any() == wrong
+    taxels, pixels = load_predicted(labels, tmap, tmap.n_taxels)  # what handskin view reads
+    assert np.array_equal(taxels, saved) and pixels is None
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--data", "{data}", "--segmenter", "{seg}"], "--data and --index go together"),
+        (["--data", "{data}", "--index", "99", "--segmenter", "{seg}"], "out of range"),
+        (["--image", "{seg}", "--segmenter", "{seg}", "--save-labels", "{out}/l.npy"],
+         "an image alone has no taxels"),
+        (["--data", "{data}", "--index", "0", "--classifier", "{seg}", "--save-labels",
+          "{out}/l.npy"], "--save-labels needs --segmenter"),
+        (["--data", "{data}", "--index", "0", "--segmenter", "{out}/none.pt"], "no checkpoint"),
+        (["--frame", "{seg}", "--data", "{data}", "--index", "0", "--segmenter", "{seg}"],
+         "give one input"),
+    ],
+)
+def test_predict_command_errors_before_work(checkpoints, tiny_dataset, tmp_path, args, message):
+    app = typer.Typer()
+    register(app)
+    fill = {"data": tiny_dataset, "seg": checkpoints["segnet"], "out": tmp_path / "out"}
+    res = CliRunner().invoke(app, ["predict", *[a.format(**fill) for a in args]])
+    assert res.exit_code == 2 and message in res.output, res.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_classifier_only_figure(predictors, tiny_dataset, tmp_path):
+    clf, _ = predictors
+    pred = predict_sample(read_sample(tiny_dataset, 30), clf)
+    assert pred.taxel_labels is None and pred.true_segmentation is not None
+    (fig,) = save_figures(pred, tmp_path / "c.png")
+    h, w = pred.image.shape
+    assert_picture(fig, (90 * (1.0 + 13 / 4 * h / w), 90 * 13 / 4))
+
+
+def test_parts_count_taxels_above_the_datasets_active_threshold(tiny_dataset, tmp_path):
+    """A synthetic dataset records its active-taxel threshold (config ``episode.active_pa``);
+    the per-part summary of a dataset sample counts only the taxels above it."""
+    src = open_dataset(tiny_dataset)
+    fields = ("raw", "pressure_pa", "image", "taxel_label", "label_image", "is_hand",
+              "subject_id", "instance_id")
+    samples = [{f: src[f][i] for f in fields} for i in (0, 30)]
+    pressure = src.pressure_from_raw(samples[0]["raw"])
+    threshold = float(np.median(pressure[pressure > 0]))
+    gain = {"skin_counts_per_pa": src.attrs["skin_counts_per_pa"]}
+    writer = DatasetWriter(tmp_path / "ds", config={"episode": {"active_pa": threshold}},
+                           part="sector", generator_version="t", seed=0, tmap=src.map,
+                           layout=src.layout, attrs=gain)  # fmt: skip
+    writer.write_chunk(0, samples)
+    writer.merge()
+    sample = read_sample(tmp_path / "ds", 0)
+    assert sample.threshold_pa == threshold and np.array_equal(sample.pressure, pressure)
+    pred = predict_sample(sample, None, Predictor(Stripes(), "segment", (32, 48), ()))
+    assert pred.parts == part_summary(pred.taxel_labels, pressure, threshold=threshold)
+    assert pred.parts != part_summary(pred.taxel_labels, pressure)

@@ -304,14 +304,15 @@ def fingertip_depth_and_width(model, data, p: str) -> tuple[float, float, float]
 
 @pytest.mark.parametrize("length_m", [0.15, 0.18, 0.22])
 @pytest.mark.parametrize("force_n", [2.0, 5.0])
-def test_fingertip_contact_patch_is_12_to_20_mm_at_moderate_force(length_m, force_n):
-    # fingerpads touch over 14-18 mm at 1-5 N (Pawluk & Howe 1999); the pulp's allowance is
-    # TISSUE_RATIO["distal"] x tissue_depth_m (sim.hand), so the capsule end sinks 4-6 mm
+def test_fingertip_contact_patch_is_10_to_15_mm_at_moderate_force(length_m, force_n):
+    # a pressed finger pad touches about 10-15 mm across at moderate force (the issue's spec);
+    # the pulp's allowance is TISSUE_RATIO["distal"] x tissue_depth_m (sim.hand), so the
+    # capsule end sinks 2.5-3 mm
     # strongest servos: the finger holds its pose, so the patch measures the tissue alone (at
     # strength 1 the compliant index yields at 5 N and the palm reaches the plate)
     cfg = HandConfig(length_m=length_m, strength=4.0)
     depth, width, radius = press_index_fingertip(cfg, force_n)
     assert 0.0005 < depth < TISSUE_RATIO["distal"] * cfg.tissue_depth_m
-    assert 0.012 <= width <= 0.020
+    assert 0.010 <= width <= 0.015
     # the plate's measure agrees with the chord of a capsule end at that depth (1 grid step)
     assert width == pytest.approx(2 * np.sqrt(2 * radius * depth - depth**2), abs=0.0015)

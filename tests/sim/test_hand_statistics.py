@@ -2,9 +2,9 @@
 
 Albini & Cannata (IJRR 2020): the palm is about 40 % of hand-labelled pixels (Fig. 10); grasps
 show several fingers; seven actions from two operator positions plus free touches. Measured on
-the default forearm (64 modules at 10.6 mm pad pitch, seed 2020): median 17 active taxels per
-hand contact (quartiles 11 / 25), palm 0.47 of hand pixels, 0.53 of grasps with >= 3 fingers,
-2 rejects (no contact) in 320.
+the default forearm (64 modules at 10.6 mm pad pitch, seed 2020): median 42 active taxels per
+hand contact (quartiles 30 / 55), palm 0.51 of hand pixels, 0.88 of grasps with >= 3 fingers,
+no rejects in 320.
 """
 
 from __future__ import annotations

@@ -13,9 +13,10 @@ from typer.testing import CliRunner
 
 from sim.tiny import tiny_config
 from sim.view import GeomShape, geom_mesh, render_scene, simulate_scene
-from sim.view_cli import register
+from sim.view_cli import register, simulated
 
 SIZE_PX = (320, 160)  # (width, height) of the test renders, pixels
+CAPTION_PX = 20  # rows of the captions at the top of a 160-pixel-high render
 
 
 def assert_not_blank(rgb: np.ndarray, min_fraction: float = 0.05) -> None:
@@ -85,3 +86,43 @@ def test_view_command_explains_a_missing_prediction(tmp_path: Path):
     result = CliRunner().invoke(app, ["view", "--part", "plate", "--color", "prediction",
                                       "--png", str(tmp_path / "v.png")])
     assert result.exit_code == 2 and "--pred" in result.output
+
+
+def _view(tmp_path: Path, name: str, *extra: str) -> np.ndarray:
+    """`handskin view --part plate --index 2` (a hand) with ``extra`` options: the 3D picture."""
+    app = typer.Typer()
+    register(app)
+    app.callback()(lambda: None)
+    png = tmp_path / f"{name}.png"
+    result = CliRunner().invoke(app, ["view", "--part", "plate", "--index", "2", "--width",
+                                      "320", "--height", "160", "--png", str(png), *extra])
+    assert result.exit_code == 0, result.output
+    return np.asarray(Image.open(png).convert("RGB")).astype(int)
+
+
+def test_view_draws_per_taxel_labels_saved_by_predict(tmp_path: Path):
+    """The hand-off of `handskin predict --save-labels FILE.npy`: (N,) uint8 class ids colour
+    the skin. Labels equal to the truth draw what --color label draws (up to the caption);
+    another labelling draws another skin."""
+    labels = simulated("plate", 0, 2, False)[0].labels  # the sample the command draws
+    assert labels.any()
+    np.save(tmp_path / "same.npy", labels.astype(np.uint8))
+    np.save(tmp_path / "other.npy", np.where(labels > 0, 0, 6).astype(np.uint8))
+    truth = _view(tmp_path, "truth", "--color", "label")
+    same = _view(tmp_path, "same", "--color", "prediction", "--pred", str(tmp_path / "same.npy"))
+    other = _view(tmp_path, "other", "--color", "prediction", "--pred",
+                  str(tmp_path / "other.npy"))
+    below = slice(CAPTION_PX, None)  # the captions differ: "skin: label" / "skin: prediction"
+    differs = lambda a, b: np.mean(np.any(np.abs(a[below] - b[below]) > 8, axis=-1))  # noqa: E731
+    assert differs(truth, same) == 0.0
+    assert differs(truth, other) > 0.05
+
+
+def test_view_explains_a_missing_labels_file(tmp_path: Path):
+    app = typer.Typer()
+    register(app)
+    app.callback()(lambda: None)
+    result = CliRunner().invoke(app, ["view", "--part", "plate", "--color", "prediction",
+                                      "--pred", str(tmp_path / "none.npy"), "--png",
+                                      str(tmp_path / "v.png")])
+    assert result.exit_code == 2 and "--save-labels" in result.output, result.output

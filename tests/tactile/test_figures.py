@@ -112,3 +112,30 @@ def test_part_bars_show_true_and_predicted(blob):
     heights = [p.get_height() for p in fig.axes[1].patches]
     assert len(heights) == 12 and sum(heights) == 2 * np.count_nonzero(pressure)
     assert_not_blank(figure_to_array(fig, dpi=50), 0.05)
+
+
+def test_prediction_figure_without_ground_truth(blob):
+    _, _, image, label_image = blob
+    fig = prediction_figure(image, None, label_image, pred_name="model")
+    assert [ax.get_title() for ax in fig.axes] == ["tactile image", "model"]
+    rgb = figure_to_array(fig, dpi=50)
+    width, height = fig.get_size_inches() * 50
+    assert abs(width - 50 * 13 / 2) <= 1
+    assert abs(rgb.shape[0] - height) <= 1 and abs(rgb.shape[1] - width) <= 1
+    assert_not_blank(rgb, 0.1)
+    assert not np.all(rgb == (255, 0, 0), axis=-1).any()  # no error panel
+    with pytest.raises(MapError, match="differ"):
+        prediction_figure(image, None, label_image[:-1])
+
+
+def test_part_bars_of_a_prediction_alone(blob):
+    pressure, labels, _, _ = blob
+    fig = part_bars_figure(None, pressure, pred_labels=labels)
+    counts = [p.get_height() for p in fig.axes[1].patches]
+    assert counts == [np.count_nonzero((labels == c) & (pressure > 0)) for c in range(1, 7)]
+    kpa = [p.get_height() for p in fig.axes[0].patches]
+    assert kpa[1] == pytest.approx(pressure[labels == 2].mean() / 1e3)
+    assert all(p.get_hatch() == "//" for p in fig.axes[1].patches)
+    assert_not_blank(figure_to_array(fig, dpi=50), 0.05)
+    with pytest.raises(MapError, match="true labels, predicted labels or both"):
+        part_bars_figure(None, pressure)

@@ -1,0 +1,253 @@
+"""The classical baselines of the paper's Table 3 — bag of visual words (`learn.bovw`) and VGG16
+features + linear SVM (`learn.vgg_svm`) — trained, saved, loaded and evaluated like the networks.
+
+    report = train_classical("bovw", "out/forearm", Path("runs/bovw"))   # runs/bovw/model.npz
+    model = load_classical("runs/bovw/model.npz")     # model.predict((S, h, w) images) -> (S,)
+    row = evaluate_classical("runs/bovw/model.npz", "out/forearm")   # a row of write_report
+
+A model file is one ``.npz`` read with ``allow_pickle=False`` (no joblib, no pickle): a JSON
+``meta`` string (kind, configuration, input size, class names, seed, versions, data) and plain
+arrays — the vocabulary, the SVM's coefficients and intercepts, the feature scaler, and for
+VGG + SVM the network's weights. Images are the split's tactile images resized to the input size
+(float in [0, 1]), as the networks see them; there is no validation hold-out (nothing is tuned).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tactile.errors import ConfigError, DataError
+
+CLASSICAL = ("bovw", "vgg_svm")
+MODEL_FILE = "model.npz"  # file name in a run folder
+DEFAULT_SIZE = (68, 100)  # (h, w) px: the paper's network input, also used for BoVW
+TIMING = {"bovw": "image → label: descriptors, visual words, SVM",
+          "vgg_svm": "image → label: VGG16 features (float, eval mode), SVM"}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class LinearSvm:
+    """A fitted linear SVM as arrays. coef : (C', D) float64, intercept : (C',) float64,
+    classes : (C,) int64 (C' = 1 for two classes, else C; one-vs-rest as sklearn's LinearSVC)."""
+
+    coef: np.ndarray
+    intercept: np.ndarray
+    classes: np.ndarray
+
+    @classmethod
+    def from_sklearn(cls, svc) -> LinearSvm:
+        """The arrays of a fitted ``sklearn.svm.LinearSVC``."""
+        return cls(np.asarray(svc.coef_, np.float64), np.asarray(svc.intercept_, np.float64),
+                   np.asarray(svc.classes_, np.int64))  # fmt: skip
+
+    def decision_function(self, features: np.ndarray) -> np.ndarray:
+        """Scores of ``features`` (S, D): (S,) for two classes, (S, C) otherwise."""
+        scores = np.asarray(features, np.float64) @ self.coef.T + self.intercept
+        return scores[:, 0] if len(self.coef) == 1 else scores
+
+    def predict(self, features: np.ndarray) -> np.ndarray:
+        """(S,) class ids (LinearSVC's rule: score > 0 for two classes, else the argmax)."""
+        scores = self.decision_function(features)
+        pick = (scores > 0).astype(np.int64) if scores.ndim == 1 else scores.argmax(axis=1)
+        return self.classes[pick]
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """``{"svm_coef", "svm_intercept", "svm_classes"}`` for :func:`save_npz`."""
+        return {"svm_coef": self.coef, "svm_intercept": self.intercept,
+                "svm_classes": self.classes}  # fmt: skip
+
+    @classmethod
+    def from_arrays(cls, arrays: Mapping[str, np.ndarray]) -> LinearSvm:
+        """Inverse of :meth:`arrays`."""
+        return cls(arrays["svm_coef"], arrays["svm_intercept"], arrays["svm_classes"])
+
+
+def save_npz(path: str | Path, meta: Mapping, arrays: Mapping[str, np.ndarray]) -> Path:
+    """Write ``meta`` (JSON) and ``arrays`` to ``path`` atomically (temporary name, replace)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
+    np.savez_compressed(tmp, meta=np.array(json.dumps(meta)), **arrays)
+    os.replace(tmp, path)
+    return path
+
+
+def load_npz(path: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
+    """(meta, arrays) of a model file; DataError naming the file and the fix."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"no model file at {path}. Fix: give a model.npz written by "
+                        "handskin train --arch bovw or --arch vgg_svm")  # fmt: skip
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {k: npz[k] for k in npz.files}
+        meta = json.loads(str(arrays.pop("meta")))
+    except (OSError, ValueError, KeyError) as err:
+        raise DataError(f"{path} is not a handskin classical model ({err}). Fix: write it "
+                        "with handskin train --arch bovw or --arch vgg_svm") from err
+    if meta.get("kind") not in CLASSICAL:
+        raise DataError(f"{path}: unknown model kind {meta.get('kind')!r}; "
+                        f"known: {', '.join(CLASSICAL)}")  # fmt: skip
+    return meta, arrays
+
+
+def load_classical(path: str | Path):
+    """The model saved in ``path`` (``BagOfVisualWords`` or ``VggSvmClassifier``) with its
+    ``meta`` dict attached; ``predict(images (S, h, w))`` -> (S,) class ids."""
+    meta, arrays = load_npz(path)
+    if meta["kind"] == "bovw":
+        from learn.bovw import BagOfVisualWords as Kind
+    else:
+        from learn.vgg_svm import VggSvmClassifier as Kind
+    model = Kind.from_arrays(meta, arrays)
+    model.meta = meta
+    return model
+
+
+def split_images(data: str | Path, split: str, size: tuple[int, int],
+                 hand_classes=None, seed: int = 0, progress: bool = False):  # fmt: skip
+    """(images (S, h, w) float32 in [0, 1], labels (S,) int64, class names) of ``split`` of a
+    dataset or image folder (the networks' reader: ``learn.folder.open_split``)."""
+    from learn.folder import HAND_NAMES, materialize, open_split
+
+    ds = open_split(Path(data), split, "classify", tuple(size), hand_classes, seed)
+    tensors = materialize(ds, split, progress)
+    names = tuple(getattr(ds, "class_names", HAND_NAMES))
+    return tensors.x[:, 0].numpy(), tensors.y.numpy().astype(np.int64), names
+
+
+def confusion(labels: np.ndarray, pred: np.ndarray, n_classes: int) -> np.ndarray:
+    """(C, C) int64 counts, rows true class, columns predicted."""
+    flat = n_classes * np.asarray(labels, np.int64) + np.asarray(pred, np.int64)
+    return np.bincount(flat, minlength=n_classes**2).reshape(n_classes, n_classes)
+
+
+def make_model(arch: str, data, out: Path, table: Mapping, *, seed: int, init, epochs,
+               progress: bool):  # fmt: skip
+    """An unfitted model and its input size (h, w) px. ``table``: config keys (BovwConfig /
+    VggSvmConfig fields, and ``input_size`` for BoVW). vgg_svm: features of the VGG16 checkpoint
+    ``init``, or of the vgg16 preset trained here into ``out/vgg16`` (``epochs``, ``seed``)."""
+    from learn.config import BovwConfig, VggSvmConfig
+    from tactile.config import from_dict
+
+    table = dict(table)
+    if "seed" in table:
+        raise ConfigError("give the seed with --seed (seed=...), not in the config file")
+    if arch == "bovw":
+        from learn.bovw import BagOfVisualWords
+
+        size = tuple(table.pop("input_size", DEFAULT_SIZE))
+        if len(size) != 2 or min(size) < 16:
+            raise ConfigError(f"input_size {list(size)}: give [h, w] pixels, each >= 16")
+        return BagOfVisualWords(from_dict(BovwConfig, {"seed": seed, **table})), size
+    from learn.experiments.models import ensure_model
+    from learn.vgg_svm import VggSvmClassifier
+
+    if "input_size" in table:
+        raise ConfigError("input_size is set by the VGG16 checkpoint for vgg_svm; remove it")
+    cfg = from_dict(VggSvmConfig, table)
+    ckpt = init if init is not None else ensure_model(
+        "vgg16", data, out, epochs=epochs, seed=seed, progress=progress, name="vgg16")
+    model = VggSvmClassifier.from_checkpoint(ckpt, cfg, seed=seed)
+    return model, model.input_size
+
+
+def train_classical(arch: str, data: str | Path, out: str | Path, *, seed: int = 0,
+                    hand_classes=None, init=None, epochs: int | None = None,
+                    config: Mapping | None = None, progress: bool = True) -> dict:  # fmt: skip
+    """Fit ``arch`` (bovw | vgg_svm) on the train split, save ``out/model.npz`` and
+    ``out/test_metrics.json``; returns the report dict (config, versions, seed, test scores)."""
+    from learn.checkpoint import versions
+    from learn.evaluate import metrics_from_cm
+
+    if arch not in CLASSICAL:
+        raise ConfigError(f"unknown classical arch {arch!r}; choose one of: {', '.join(CLASSICAL)}")
+    out = Path(out)
+    model, size = make_model(arch, data, out, config or {}, seed=seed, init=init, epochs=epochs,
+                             progress=progress)  # fmt: skip
+    x, y, names = split_images(data, "train", size, hand_classes, seed, progress)
+    model.fit(x, y)
+    desc = {"path": str(data), "hand_classes": None if hand_classes is None else
+            list(hand_classes), "n_train": len(y)}  # fmt: skip
+    cfg, arrays = model.to_arrays()
+    meta = {"kind": arch, "config": cfg, "input_size": list(size), "class_names": list(names),
+            "seed": seed, "versions": versions(), "data": desc}  # fmt: skip
+    save_npz(out / MODEL_FILE, meta, arrays)
+    x, y, _ = split_images(data, "test", size, hand_classes, seed, progress)
+    cm = confusion(y, model.predict(x), len(names))
+    report = {"config": cfg, "versions": meta["versions"], "seed": seed, "data": desc,
+              "test_metrics": metrics_from_cm(cm), "test_confusion": cm.tolist()}  # fmt: skip
+    (out / "test_metrics.json").write_text(json.dumps(report, indent=1))
+    return report
+
+
+def train_checked(arch: str, data, out: Path, *, config_path: Path | None = None,
+                  seed: int | None = None, hand_classes=None, init: Path | None = None,
+                  epochs: int | None = None, unused: Mapping[str, object] | None = None,
+                  progress: bool = True) -> dict:  # fmt: skip
+    """``handskin train --arch bovw|vgg_svm``: options checked (``unused``: option name → value
+    of the network-only options, which must be None), then :func:`train_classical`."""
+    from tactile.config import read_toml
+
+    given = [name for name, value in (unused or {}).items() if value is not None]
+    if given:
+        raise ConfigError(f"{given[0]} does not apply to --arch {arch} (no gradient training); "
+                          "remove it")  # fmt: skip
+    if arch == "bovw" and (init is not None or epochs is not None):
+        raise ConfigError("--init and --epochs apply to --arch vgg_svm only; remove them")
+    if init is not None and epochs is not None:
+        raise ConfigError("--epochs trains a vgg16 when no --init is given; give one of the two")
+    table = read_toml(config_path) if config_path is not None else {}
+    return train_classical(arch, data, out, seed=seed or 0, hand_classes=hand_classes,
+                           init=init, epochs=epochs, config=table, progress=progress)  # fmt: skip
+
+
+def ms_per_image(model, images: np.ndarray, threads: int = 1, n_runs: int = 100,
+                 n_warmup: int = 20) -> float:  # fmt: skip
+    """Median CPU ms per image of ``model.predict`` at batch 1 (image k of ``images`` (S, h, w)
+    at run k, cycling) after ``n_warmup`` runs, with ``threads`` torch threads."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    times = []
+    try:
+        for k in range(n_warmup + n_runs):
+            one = images[k % len(images)][None]
+            start = time.perf_counter()
+            model.predict(one)
+            times.append(time.perf_counter() - start)
+    finally:
+        torch.set_num_threads(before)
+    return 1e3 * float(np.median(times[n_warmup:]))
+
+
+def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
+                       threads: int = 1, time_runs: int = 100) -> dict:  # fmt: skip
+    """Test-split scores and CPU ms/image of a classical model file; a row of
+    ``learn.evaluate.write_report`` (the same keys as ``evaluate_checkpoint``'s)."""
+    from learn.evaluate import metrics_from_cm
+
+    model = load_classical(path)
+    meta = model.meta
+    hand = hand_classes or meta["data"].get("hand_classes")
+    x, y, names = split_images(data, "test", meta["input_size"], hand, meta["seed"])
+    if list(names) != list(meta["class_names"]):
+        raise DataError(f"{data} has classes {list(names)}; {path} was trained on "
+                        f"{meta['class_names']}. Fix: the same kind of data (or --hand-classes)")
+    cm = confusion(y, model.predict(x), len(names))
+    scores = metrics_from_cm(cm)
+    ms = ms_per_image(model, x, threads, time_runs)
+    return {"checkpoint": str(path), "arch": meta["kind"], "task": "classify", "epoch": None,
+            "class_names": list(meta["class_names"]), "n_test": len(y), "cm": cm.tolist(),
+            "metrics": scores, "fast_metrics": scores, "bf16": False,
+            "ms_per_image": {"fast": ms, "gpu": None}, "timing": TIMING[meta["kind"]],
+            "threads": threads, "seed": meta["seed"], "config": meta["config"],
+            "input_size": meta["input_size"], "train_versions": meta["versions"]}  # fmt: skip
