@@ -35,6 +35,7 @@ def _root(
 
 def _register() -> None:
     from learn.cli import register as register_learn
+    from learn.experiments.cli import register as register_experiments
     from sim.cli import register as register_sim
     from sim.view_cli import register as register_view
     from tactile.cli import register as register_tactile
@@ -45,6 +46,7 @@ def _register() -> None:
     register_dataset(app)
     register_view(app)
     register_learn(app)
+    register_experiments(app, extra_modules=("handskin.transfer", "handskin.fidelity"))
 
 
 _register()

@@ -1,0 +1,219 @@
+"""Test frames for the robustness experiments (torch-free): raw readings back to the pressures a
+dataset's images were made from, a split held in memory, and network inputs made as in training.
+
+    test = load_frames("data/forearm", "test", n_classify=None, n_segment=200, seed=0)
+    images = test.tmap.image(test.pressure_pa[:64])   # (64, H, W) uint8, the stored pipeline
+    x = net_inputs(images, (68, 100))                 # (64, 1, 68, 100) float32 in [0, 1]
+
+The generator images ``(reading - baseline - drift * t)`` with readings less than 3 noise sd
+above the baseline set to 0, over the nominal gain; ``DatasetReader.pressure_from_raw`` applies
+neither the floor nor the drift, so :class:`Readout` does, from the dataset's attributes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tactile.dataset.reader import DatasetReader
+from tactile.errors import ConfigError, DataError
+from tactile.labels import label_image
+from tactile.layout import TaxelLayout
+from tactile.resize import resize_image, resize_labels
+from tactile.tactile_map import TactileMap
+
+#: The generator reads counts less than this many noise sd above the untouched reading as 0.
+NOISE_FLOOR_SIGMAS = 3.0
+#: First spawn-key element of each random stream derived from the one --seed (kept disjoint).
+KEY_SUBSET, KEY_SPOTS, KEY_REMOVAL, KEY_POOL, KEY_COPIES = 1, 2, 3, 4, 5
+CHUNK = 128  # frames imaged at once (a 229 x 383 float64 batch of 128 is 90 MB)
+
+
+def stream(seed: int, *key: int) -> np.random.Generator:
+    """The generator of one random stream: ``SeedSequence(seed, spawn_key=key)``."""
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=tuple(map(int, key))))
+
+
+@dataclass(frozen=True)
+class Readout:
+    """How raw counts become the pressures (Pa) the dataset's images were made from.
+
+    gain_counts_per_pa : float, counts/Pa. baseline_counts : () or (N,) float, counts.
+    drift_counts_per_s : () or (N,) float, counts/s (attr ``skin_drift_counts_per_s``; 0 if the
+    dataset does not store it). floor_counts : float, counts — signals at or below it read 0.
+    """
+
+    gain_counts_per_pa: float
+    baseline_counts: np.ndarray
+    drift_counts_per_s: np.ndarray
+    floor_counts: float
+
+    @classmethod
+    def of(cls, reader: DatasetReader) -> Readout:
+        """The readout of a dataset: root attrs, noise sd from ``config.episode.skin``."""
+        attrs = reader.attrs
+        config = attrs.get("config") if isinstance(attrs.get("config"), dict) else {}
+        skin = (config.get("episode") or {}).get("skin") or {}
+        floor = NOISE_FLOOR_SIGMAS * float(skin.get("noise_std_counts", 0.0))
+        return cls(
+            float(attrs.get("skin_counts_per_pa", 1.0)),
+            np.asarray(attrs.get("skin_baseline_counts", 0.0), dtype=np.float64),
+            np.asarray(attrs.get("skin_drift_counts_per_s", 0.0), dtype=np.float64),
+            floor,
+        )
+
+    def pressure_pa(self, raw: np.ndarray, time_s: np.ndarray | None = None) -> np.ndarray:
+        """Pressures (B, N) float64, Pa, from raw counts (B, N) read at times ``time_s`` (B,) s."""
+        t = np.zeros(len(raw)) if time_s is None else np.asarray(time_s, dtype=np.float64)
+        signal = np.asarray(raw, dtype=np.float64) - self.baseline_counts
+        signal -= self.drift_counts_per_s * t[:, None]
+        return np.where(signal > self.floor_counts, signal, 0.0) / self.gain_counts_per_pa
+
+
+@dataclass(frozen=True, eq=False)
+class Frames:
+    """Frames of one split in memory; rows in split order.
+
+    tmap, layout : the dataset's map and layout (N taxels, (H, W) images).
+    sample_ids : (S,) int64 dataset sample of each row. pressure_pa : (S, N) float64, Pa.
+    is_hand : (S,) int64, 0/1. taxel_label : (S, N) uint8, 0..6.
+    classify : (C,) int64 rows used for classification. segment : (K,) int64 rows (hand
+    samples) used for segmentation. label_image : (K, H, W) uint8, their ground truth
+    regenerated at zero corruption. n_split : samples in the whole split.
+    """
+
+    tmap: TactileMap
+    layout: TaxelLayout
+    sample_ids: np.ndarray
+    pressure_pa: np.ndarray
+    is_hand: np.ndarray
+    taxel_label: np.ndarray
+    classify: np.ndarray
+    segment: np.ndarray
+    label_image: np.ndarray
+    n_split: int
+
+
+def _pick(n_total: int, n: int | None, rng: np.random.Generator) -> np.ndarray:
+    """Sorted positions of a seeded subset of size ``n`` (all when None or n >= n_total)."""
+    if n is None or n >= n_total:
+        return np.arange(n_total)
+    return np.sort(rng.choice(n_total, size=n, replace=False))
+
+
+def _check_counts(n_classify: int | None, n_segment: int) -> None:
+    if n_classify is not None and n_classify < 1:
+        raise ConfigError(f"the number of classified samples must be >= 1, got {n_classify}")
+    if n_segment < 0:
+        raise ConfigError(f"the number of segmented samples must be >= 0, got {n_segment}")
+
+
+def load_frames(
+    path: str | Path, split: str = "test", *, n_classify: int | None = None,
+    n_segment: int = 0, seed: int = 0,
+) -> Frames:  # fmt: skip
+    """Read a split's frames: pressures from raw readings, labels, and the chosen subsets.
+
+    n_classify : samples classified (seeded subset; None = all). n_segment : hand samples
+    segmented (seeded subset, at most all). Subsets come from ``stream(seed, KEY_SUBSET)``.
+    """
+    _check_counts(n_classify, n_segment)
+    reader = DatasetReader(path)
+    need = ["is_hand"] + (["taxel_label"] if n_segment else [])
+    missing = [f for f in need if f not in reader.fields]
+    if missing:
+        raise DataError(f"{reader.path} has no {missing}; robustness needs them. "
+                        "Fix: a dataset with hand labels (generated, or ingested with --labels)")
+    with reader:
+        ids = np.asarray(reader.splits.get(split, []), dtype=np.int64)
+        if len(ids) == 0:
+            raise DataError(f"{reader.path}: the {split} split is empty. Fix: re-merge the dataset")
+        rng = stream(seed, KEY_SUBSET)
+        is_hand_all = reader.is_hand[:].astype(np.int64)[ids]
+        clf = _pick(len(ids), n_classify, rng)
+        hands = np.flatnonzero(is_hand_all == 1)
+        if n_segment and len(hands) == 0:
+            raise DataError(f"{reader.path}: no hand sample in the {split} split to segment")
+        seg = hands[_pick(len(hands), n_segment, rng)] if n_segment else hands[:0]
+        rows = np.union1d(clf, seg)
+        frames = read_rows(reader, ids[rows])
+    p = frames["pressure"]
+    labels = frames["taxel_label"]
+    pos = {r: i for i, r in enumerate(rows)}
+    seg_rows = np.array([pos[r] for r in seg], dtype=np.int64)
+    truth = label_images(reader.map, p[seg_rows], labels[seg_rows])
+    return Frames(reader.map, reader.layout, ids[rows], p, is_hand_all[rows], labels,
+                  np.array([pos[r] for r in clf], dtype=np.int64), seg_rows, truth,
+                  len(ids))  # fmt: skip
+
+
+def read_rows(reader: DatasetReader, ids: np.ndarray) -> dict[str, np.ndarray]:
+    """Pressures (S, N) Pa and taxel labels (S, N) of dataset samples ``ids`` (any order)."""
+    order = np.argsort(ids)
+    back = np.argsort(order)
+    sorted_ids = ids[order]
+    raw = reader.raw[sorted_ids][back]
+    time_s = reader.time_s[sorted_ids][back] if "time_s" in reader.fields else None
+    n = raw.shape[1]
+    has_labels = "taxel_label" in reader.fields
+    labels = reader.taxel_label[sorted_ids][back] if has_labels else np.zeros((len(ids), n))
+    return {"pressure": Readout.of(reader).pressure_pa(raw, time_s),
+            "taxel_label": labels.astype(np.uint8)}  # fmt: skip
+
+
+def label_images(tmap: TactileMap, p: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Label images (B, H, W) uint8 of frames p (B, N) Pa with taxel classes (B, N)."""
+    out = np.zeros((len(p), *tmap.shape), dtype=np.uint8)
+    for start in range(0, len(p), CHUNK):
+        for j, image in enumerate(tmap.image(p[start : start + CHUNK])):
+            i = start + j
+            out[i] = label_image(tmap, p[i], labels[i], image=image)
+    return out
+
+
+def images(tmap: TactileMap, p: np.ndarray) -> np.ndarray:
+    """Tactile images (B, H, W) uint8 of frames p (B, N) Pa, imaged ``CHUNK`` at a time."""
+    parts = [tmap.image(p[s : s + CHUNK]) for s in range(0, len(p), CHUNK)]
+    return np.concatenate(parts) if parts else np.zeros((0, *tmap.shape), np.uint8)
+
+
+def net_inputs(images_u8: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Network inputs (B, 1, h, w) float32 in [0, 1] from images (B, H, W) uint8, made as
+    ``learn.data.TorchTactileDataset`` makes them (scale to [0, 1], then anti-aliased resize)."""
+    x = images_u8.astype(np.float32) / np.float32(255.0)
+    return resize_image(x, tuple(size))[:, None] if len(x) else x[:, None, :0, :0]
+
+
+def net_labels(labels: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Label images (B, H, W) at the network's (h, w) (nearest neighbour), int64."""
+    return resize_labels(labels, tuple(size)).astype(np.int64)
+
+
+def stored_agreement(path: str | Path, frames: Frames) -> dict[str, float]:
+    """How the images regenerated at zero corruption compare with the stored ones.
+
+    Returns fractions of identical images and of differing pixels, the largest grey-level
+    difference, and the fraction of differing label pixels of the segmentation rows.
+    """
+    reader = DatasetReader(path)
+    with reader:
+        ids = frames.sample_ids
+        order = np.argsort(ids)
+        same, diff_px, max_diff, n_px = 0, 0, 0, 0
+        for s in range(0, len(ids), CHUNK):
+            rows = order[s : s + CHUNK]
+            stored = reader.image[ids[rows]]
+            made = frames.tmap.image(frames.pressure_pa[rows])
+            d = np.abs(made.astype(np.int16) - stored)
+            same += int((d == 0).all(axis=(1, 2)).sum())
+            diff_px += int((d > 0).sum())
+            max_diff = max(max_diff, int(d.max(initial=0)))
+            n_px += d.size
+        seg_ids = ids[frames.segment]
+        o = np.argsort(seg_ids)
+        stored_lbl = reader.label_image[seg_ids[o]] if len(o) else frames.label_image
+        lbl_diff = float((stored_lbl != frames.label_image[o]).mean()) if len(o) else 0.0
+    return {"identical_images": same / len(ids), "differing_pixels": diff_px / n_px,
+            "max_grey_difference": max_diff, "differing_label_pixels": lbl_diff}  # fmt: skip

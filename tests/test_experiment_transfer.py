@@ -1,0 +1,178 @@
+"""`handskin experiment transfer` (Test C) end to end on tiny generated datasets: the curve's
+subsets are nested, class-balanced and subject-/instance-disjoint from the test split (checked on
+the dataset's own ids), the zero-shot score equals an independent evaluation, the synthetic
+pretraining set leaves out the target's test instances, datasets are reused, and bad input fails
+before any work."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import typer
+from matplotlib.image import imread
+from typer.testing import CliRunner
+
+from handskin import transfer as T
+from learn.checkpoint import load_checkpoint, model_from_checkpoint
+from learn.experiments.transfer_lib import TransferSettings, nested_order
+from tactile.dataset.reader import DatasetReader
+from tactile.errors import ConfigError
+from tactile.resize import resize_image
+
+SETTINGS = TransferSettings(curve_sizes=(4, 8), finetune_epochs=2, pretrain_epochs=2,
+                            pretrain_flips=False, input_size=(32, 48), seed=1,
+                            threads=1)  # fmt: skip
+PLAN = T.DataPlan(n_source=24, n_target=40, n_pretrain=24, tiny=True)
+
+
+def test_nested_order_prefixes_are_class_balanced():
+    labels = (np.random.default_rng(0).random(50) < 0.3).astype(int)
+    order = nested_order(labels, seed=3)
+    assert sorted(order) == list(range(50))
+    share = np.bincount(labels) / len(labels)
+    for n in range(1, 51):
+        counts = np.bincount(labels[order[:n]], minlength=2)
+        assert np.all(np.abs(counts - n * share) <= 1), (n, counts)
+    assert np.array_equal(order, nested_order(labels, 3))
+    assert not np.array_equal(order, nested_order(labels, 4))
+
+
+def test_dataset_seeds_differ_by_role_and_follow_the_seed():
+    seeds = [T.dataset_seed(0, role) for role in T.ROLES]
+    assert len(set(seeds)) == 3 and seeds == [T.dataset_seed(0, r) for r in T.ROLES]
+    assert T.dataset_seed(1, "target") != T.dataset_seed(0, "target")
+
+
+@pytest.fixture(scope="module")
+def transfer_run(tmp_path_factory):
+    torch.set_num_threads(1)
+    out = tmp_path_factory.mktemp("transfer")
+    return out, T.run_transfer_experiment(out, s=SETTINGS, plan=PLAN, progress=False)
+
+
+def ids(folder, index: np.ndarray) -> tuple[set, set]:
+    """(subject ids >= 0, instance ids >= 0) of the samples ``index`` of a dataset."""
+    with DatasetReader(folder) as ds:
+        subject, instance = ds.subject_id[:][index], ds.instance_id[:][index]
+    return set(subject[subject >= 0].tolist()), set(instance[instance >= 0].tolist())
+
+
+def test_curve_subsets_are_nested_balanced_and_disjoint_from_test(transfer_run):
+    out, res = transfer_run
+    target = out / "data" / "end_effector"
+    with DatasetReader(target) as ds:
+        train, test, hand = ds.splits["train"], ds.splits["test"], ds.is_hand[:]
+        assert ds.attrs["part"] == "end_effector"
+    r = res["classify"]
+    assert (r["n_train"], r["n_test"]) == (len(train), len(test))
+    test_subjects, test_instances = ids(target, test)
+    assert test_subjects and test_instances  # the disjointness below is not vacuous
+    previous: set = set()
+    for k, n in enumerate([4, 8, len(train)]):
+        samples = {tuple(r["curve"][i][k]["samples"]) for i in r["curve"]}
+        assert len(samples) == 1  # the three starting points train on the same samples
+        chosen = np.array(samples.pop())
+        assert len(chosen) == n and set(chosen) <= set(train) and previous <= set(chosen)
+        subjects, instances = ids(target, chosen)
+        assert not subjects & test_subjects and not instances & test_instances
+        share = hand[train].mean()
+        assert abs(hand[chosen].sum() - n * share) <= 1
+        previous = set(chosen)
+    assert r["finetuned"]["samples"] == sorted(train.tolist())
+
+
+def test_zero_shot_equals_an_independent_evaluation(transfer_run):
+    out, res = transfer_run
+    r = res["classify"]
+    model, run = model_from_checkpoint(load_checkpoint(r["forearm_checkpoint"]))
+    with DatasetReader(out / "data" / "end_effector") as ds:
+        test = ds.splits["test"]
+        x = np.stack([resize_image(ds.image[i].astype(np.float32) / 255, run.model.input_size)
+                      for i in test])  # fmt: skip
+        truth = ds.is_hand[:][test]
+    with torch.no_grad():
+        pred = model(torch.from_numpy(x)[:, None]).argmax(1).numpy()
+    assert r["zero_shot"]["forearm"]["metrics"]["accuracy"] == pytest.approx(np.mean(pred == truth))
+    cm = np.array(r["zero_shot"]["forearm"]["cm"])
+    assert cm.sum() == len(test) and np.array_equal(cm.sum(1), np.bincount(truth, minlength=2))
+
+
+def test_synthetic_pretraining_leaves_out_the_target_test_instances(transfer_run):
+    out, res = transfer_run
+    ckpt = load_checkpoint(res["classify"]["synthetic_checkpoint"])
+    with DatasetReader(out / "data" / "end_effector") as ds:
+        held = ds.instance_id[:][ds.splits["test"]]
+    with DatasetReader(out / "data" / "end_effector_synthetic") as ds:
+        n, instance = len(ds), ds.instance_id[:]
+    dropped = int(np.isin(instance, held[held >= 0]).sum())
+    desc = ckpt["data"]
+    assert desc["n_dropped_shared_instances"] == dropped
+    assert desc["n_train"] + desc["n_val"] == n - dropped
+
+
+def test_transfer_report_and_chart(transfer_run):
+    out, res = transfer_run
+    text = (out / "report.md").read_text()
+    for needle in ("(paper: Table 15)", "(paper: Table 16)", "learning curve", "unknown",
+                   "true \\ predicted", "end_effector_synthetic", "halved after 1 of 2"):
+        assert needle in text, needle
+    img = imread(out / "curve_classify.png")[..., :3]
+    assert img.std() > 0.05 and (img.mean(-1) < 0.5).mean() > 0.005
+    assert res["report"] == str(out / "report.md") and (out / "results.json").is_file()
+
+
+def test_datasets_are_reused_and_a_default_folder_of_another_size_refused(transfer_run):
+    out, _ = transfer_run
+    folder = out / "data" / "end_effector"
+    before = (folder / "dataset.h5").stat().st_mtime_ns
+    cfg = T.generate_config("target", SETTINGS.seed, PLAN)
+    assert T.ensure_dataset(folder, cfg, PLAN, default=True, progress=False) == folder
+    assert (folder / "dataset.h5").stat().st_mtime_ns == before
+    bigger = T.generate_config("target", SETTINGS.seed, T.DataPlan(n_target=50, tiny=True))
+    with pytest.raises(ConfigError, match="holds 40"):
+        T.ensure_dataset(folder, bigger, PLAN, default=True, progress=False)
+    assert T.ensure_dataset(folder, bigger, PLAN, default=False, progress=False) == folder
+
+
+@pytest.fixture(scope="module")
+def app() -> typer.Typer:
+    app = typer.Typer()
+    T.register(app)
+    app.command("noop")(lambda: None)  # a second command keeps "transfer" a sub-command
+    return app
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--classifier", "{missing}"], "no checkpoint"),
+        (["--segmenter", "{classifier}"], "not a segmenter"),
+        (["--curve", "10,x"], "expected sample counts"),
+        (["--epochs", "0"], "must be >= 1"),
+        (["--n-target", "0"], "n = 0 is out of range"),
+    ],
+)
+def test_bad_input_fails_before_work(app, transfer_run, tmp_path, args, message):
+    _, res = transfer_run
+    out = tmp_path / "out"
+    names = {"missing": str(tmp_path / "missing.pt"),
+             "classifier": res["classify"]["forearm_checkpoint"]}  # fmt: skip
+    result = CliRunner().invoke(app, ["transfer", "--out", str(out), "--quick", "--no-progress",
+                                      *(a.format(**names) for a in args)])  # fmt: skip
+    assert result.exit_code == 2, result.output
+    assert "error:" in result.output and message in result.output, result.output
+    assert not out.exists()
+
+
+def test_segmentation_tables_follow_table_15_layout():
+    from learn.evaluate import metrics_from_cm
+    from learn.experiments.transfer_report import SEG_KEYS, scores_table
+
+    cm = np.random.default_rng(2).integers(0, 50, (7, 7))
+    table = scores_table("segment", [("SegNet", {"metrics": metrics_from_cm(cm)})])
+    head, _, row = table.splitlines()
+    assert head.split(" | ")[1:5] == [f"{h} % (ours)" for _, h in SEG_KEYS]
+    cells = row.strip("| ").split(" | ")
+    ours = [f"{100 * metrics_from_cm(cm)[k]:.2f}" for k, _ in SEG_KEYS]
+    assert cells[1:5] == ours and cells[5:] == ["unknown"] * 4
