@@ -152,6 +152,7 @@ EpochsOpt = _opt(int | None, "Fine-tuning epochs of both networks (count; defaul
                  "classifier and 2 for the segmenter, --quick 1).")
 CopiesOpt = _opt(int | None, "Faulty copies of each train sample (count; default 2, --quick 1).")
 PatternsOpt = _opt(int | None, "Random patterns per condition (count; default 5, --quick 1).")
+LrOpt = _opt(float | None, "Fine-tuning learning rate / the plain run's (ratio; default 0.1).")
 ModelsOpt = _opt(Path | None, "Folder of networks trained here and reused (default OUT/models).")
 ThreadsOpt = _opt(int, "CPU threads used by torch (count).")
 ProgressOpt = _opt(bool, "Show progress bars.")
@@ -160,15 +161,16 @@ ProgressOpt = _opt(bool, "Show progress bars.")
 def fault_aware_command(
     out: OutOpt, data: DataOpt, quick: QuickOpt = False, seed: SeedOpt = 0,
     classifier: ClfOpt = None, segmenter: SegOpt = None, epochs: EpochsOpt = None,
-    copies: CopiesOpt = None, patterns: PatternsOpt = None, models: ModelsOpt = None,
-    threads: ThreadsOpt = 2, progress: ProgressOpt = True,
+    copies: CopiesOpt = None, patterns: PatternsOpt = None, lr_factor: LrOpt = None,
+    models: ModelsOpt = None, threads: ThreadsOpt = 2, progress: ProgressOpt = True,
 ) -> None:  # fmt: skip
     """Fault-aware training (see ``FA_HELP``)."""
     from learn.cli import _fail
 
     try:
         scale = QUICK_FA if quick else FULL_FA
-        changes = {"epochs": None if epochs is None else (epochs, epochs), "copies": copies}
+        changes = {"epochs": None if epochs is None else (epochs, epochs), "copies": copies,
+                   "lr_factor": lr_factor}  # fmt: skip
         scale = dataclasses.replace(scale, **{k: v for k, v in changes.items() if v is not None})
         scale = dataclasses.replace(scale, eval=scale.eval.changed(patterns, None, None))
         path = run_fault_aware(data, out, scale=scale, seed=seed, classifier=classifier,

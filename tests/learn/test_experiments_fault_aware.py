@@ -7,10 +7,17 @@ import json
 import numpy as np
 import pytest
 import torch
+import typer
 from matplotlib.image import imread
+from typer.testing import CliRunner
 
 from learn.checkpoint import load_checkpoint
-from learn.experiments.fault_aware import FaultAwareScale, fault_aware_model, run_fault_aware
+from learn.experiments.fault_aware import (
+    FaultAwareScale,
+    fault_aware_model,
+    register,
+    run_fault_aware,
+)
 from learn.experiments.robustness_data import KEY_REMOVAL, Readout, stream
 from learn.experiments.robustness_faults import (
     FaultMix,
@@ -119,3 +126,13 @@ def test_fault_aware_end_to_end(tiny_dataset, checkpoints, tmp_path):
         fault_aware_model(checkpoints["handsnet"], tiny_dataset,
                           tmp_path / "models" / "handsnet_fault_aware", epochs=2, n_train=8,
                           scale=scale, seed=3, progress=False)  # fmt: skip
+
+
+def test_cli_refuses_bad_settings_before_any_work(tiny_dataset, tmp_path):
+    app = typer.Typer()
+    app.callback()(lambda: None)  # a group, as `handskin experiment` is
+    register(app)
+    res = CliRunner().invoke(app, ["fault-aware", "--out", str(tmp_path / "o"), "--data",
+                                   str(tiny_dataset), "--lr-factor", "0"])  # fmt: skip
+    assert res.exit_code == 2 and "lr factor > 0" in res.output
+    assert not (tmp_path / "o").exists()
