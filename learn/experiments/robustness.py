@@ -148,11 +148,12 @@ OutOpt = _opt(Path, "Output folder: report.md, results.json, PNG charts (and mod
               "networks are trained here).")
 DataOpt = _opt(Path, "Dataset folder (holding dataset.h5); its test split is corrupted.")
 QuickOpt = _opt(bool, "Small run (minutes): 2 patterns per condition, 300 test samples "
-                "classified, 40 hand samples segmented; missing networks trained 3 epochs on 600 "
-                "(HandsNet, Adam at lr 0.001) / 200 (SegNet, width 0.25) train samples.")
+                "classified, 40 hand samples segmented; missing networks trained 2 epochs "
+                "(HandsNet on the whole train part, SegNet on 600 train samples).")
 SeedOpt = _opt(int, "Seed of every random draw: patterns, subsets, training (integer).")
 ClfOpt = _opt(Path | None, "Classifier checkpoint (.pt file from handskin train). Default: "
-              "train HandsNet here (full: the preset, hours on a CPU; --quick: minutes).")
+              "train HandsNet here (the learn.config preset: tens of minutes on 2 cores; "
+              "--quick: minutes).")
 SegOpt = _opt(Path | None, "Segmenter checkpoint (.pt file). Default: train SegNet here.")
 PatternsOpt = _opt(int | None, "Random patterns per condition (count; default 10, --quick 2).")
 TestOpt = _opt(int | None, "Test samples classified, a fixed-seed subset (count; default all, "

@@ -40,8 +40,9 @@ def _training(scale, trained: list[dict]) -> str:
         f"Each fault-aware network starts from the plain one and is trained {scale.epochs} "
         f"(classifier, segmenter) more epochs, without flips, on the train part (subsets "
         f"{scale.n_train}, None = all) plus {scale.copies} faulty copies per sample, at "
-        f"{scale.lr_factor:g} x the plain run's learning rate; validation on the clean "
-        "subject-disjoint part picks the best epoch. The plain network gets no extra epochs, "
+        f"{scale.lr_factor:g} x the plain run's learning rate; the subject-disjoint "
+        "validation part, clean plus as many faulty copies, picks the best epoch. The plain "
+        "network gets no extra epochs, "
         "so compare the 0 % rows too. Faults per copy: " + mix + ".\n\n"
         + markdown_table(["network", "initialised from", "epochs", "lr", "train images",
                           "training (min)"], rows)

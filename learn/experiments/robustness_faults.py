@@ -1,17 +1,17 @@
-"""Fault-aware training data: the train split plus K copies of it with random sensor faults.
+"""Fault-aware training data: the train part plus K copies of it with random sensor faults.
 
     mix = FaultMix()
     data = augmented_data("data/forearm", run, n_train=None, copies=2, mix=mix, seed=0)
     fit(run, data, "models/handsnet_fault_aware", init_from="models/handsnet/best.pt")
 
-Copy c of train sample i draws its faults from ``stream(seed, KEY_COPIES, c, i)``: blind spots,
-dead modules and gain drift on the pressures (``tactile.faults``), then, with probability
-``p_removal``, one map of a pool of rebuilt maps with taxels removed (drawn from
-``stream(seed, KEY_POOL, j)``, a stream the evaluation never uses, so no test pattern is seen in
-training). The image is regenerated through that map exactly as the evaluation does; the
-segmentation target is the faulty frame's label image, background inside the spots, traced
-onto the rebuilt map (pixels it does not cover are background). Precomputing the copies keeps
-``learn.train.fit`` unchanged (``TensorData`` in memory).
+Copy c of sample i (train or validation part) draws its faults from
+``stream(seed, KEY_COPIES, c, i)``: blind spots, dead modules and gain drift on the pressures
+(``tactile.faults``), then, with probability ``p_removal``, one map of a pool of rebuilt maps
+with taxels removed (drawn from ``stream(seed, KEY_POOL, j)``, a stream the evaluation never
+uses, so no test pattern is seen in training). The image is regenerated through that map
+exactly as the evaluation does; the segmentation target is the faulty frame's label image,
+background inside the spots, traced onto the rebuilt map (pixels it does not cover are
+background). Precomputing the copies keeps ``learn.train.fit`` unchanged (``TensorData``).
 """
 
 from __future__ import annotations
@@ -136,17 +136,32 @@ def faulty_copies(
 def augmented_data(path: str | Path, run, n_train: int | None, copies: int, mix: FaultMix,
                    seed: int, progress: bool = True):  # fmt: skip
     """``learn.folder.Data``: the (subset of the) train part's stored images followed by
-    ``copies`` faulty copies; the validation part is left clean."""
-    import torch
-
+    ``copies`` faulty copies of them, and the validation part likewise, so that the epoch
+    kept is the best on clean and faulty images together."""
     from learn.experiments.robustness_models import split_data
-    from learn.folder import Data, TensorData
+    from learn.folder import Data
 
     if copies < 0:
         raise ConfigError(f"faulty copies must be >= 0, got {copies}")
     data, ids = split_data(path, run, n_train, seed, progress)
-    x, y = faulty_copies(path, ids, run.task, run.model.input_size, copies, mix, seed)
-    train = TensorData(torch.cat([data.train.x, torch.from_numpy(x)]),
-                       torch.cat([data.train.y, torch.from_numpy(y)]))  # fmt: skip
-    desc = {**data.description, "n_train": len(train.y), "faulty_copies": copies}
-    return Data(train, data.val, None, data.class_names, desc)
+    size = run.model.input_size
+    train = _with_copies(data.train, faulty_copies(path, ids["train"], run.task, size, copies,
+                                                   mix, seed))  # fmt: skip
+    val = data.val
+    if val is not None:
+        val = _with_copies(val, faulty_copies(path, ids["val"], run.task, size, copies, mix,
+                                              seed))  # fmt: skip
+    desc = {**data.description, "n_train": len(train.y), "n_val": 0 if val is None else
+            len(val.y), "faulty_copies": copies}  # fmt: skip
+    return Data(train, val, None, data.class_names, desc)
+
+
+def _with_copies(clean, copies: tuple[np.ndarray, np.ndarray]):
+    """TensorData of ``clean`` followed by the copies (x, y) arrays."""
+    import torch
+
+    from learn.folder import TensorData
+
+    x, y = copies
+    return TensorData(torch.cat([clean.x, torch.from_numpy(x)]),
+                      torch.cat([clean.y, torch.from_numpy(y)]))  # fmt: skip

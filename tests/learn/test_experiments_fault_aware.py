@@ -99,6 +99,8 @@ def test_augmented_data_adds_seeded_faulty_copies(tiny_dataset, tiny_run):
     assert not torch.equal(a.train.x[8:], c.train.x[8:])
     assert not torch.equal(a.train.x[8:16], a.train.x[:8])
     assert a.description["faulty_copies"] == 2
+    n_val = len(a.val.y) // 3
+    assert len(a.val.y) == 3 * n_val and torch.equal(a.val.y[n_val : 2 * n_val], a.val.y[:n_val])
 
 
 def test_fault_aware_end_to_end(tiny_dataset, checkpoints, tmp_path):

@@ -7,6 +7,7 @@ floor), computed here independently of the code under test.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -229,15 +230,16 @@ def test_removal_study_zero_row_and_nesting(sensed_dataset, predictors):
     assert (total == len(frames.classify)).all()
 
 
-def test_quick_plan_changes_only_what_it_says():
+def test_plans_change_only_what_they_say():
     from learn import config as C
 
     clf, seg = plan_run("handsnet", QUICK_PLAN, 4), plan_run("segnet", QUICK_PLAN, 4)
-    assert (clf.train.optimizer, clf.train.lr, clf.train.epochs) == ("adam", 1e-3, 3)
-    assert clf.model == C.HANDSNET.model and not clf.flips and clf.train.seed == 4
-    assert seg.train.optimizer == C.SEGNET.train.optimizer and seg.train.lr == C.SEGNET.train.lr
-    assert seg.model.width == 0.25 and seg.train.loss == C.SEGNET.train.loss
-    assert QUICK_PLAN.samples("handsnet") == 600 and QUICK_PLAN.samples("segnet") == 200
+    assert clf.train == dataclasses.replace(C.HANDSNET.train, epochs=2, seed=4)
+    assert seg.train == dataclasses.replace(C.SEGNET.train, epochs=2, seed=4)
+    assert (clf.model, seg.model) == (C.HANDSNET.model, C.SEGNET.model) and clf.flips
+    assert QUICK_PLAN.samples("handsnet") is None and QUICK_PLAN.samples("segnet") == 600
+    tiny = plan_run("segnet", TrainPlan(seg_width=0.125, input_size=(32, 48), flips=False), 0)
+    assert (tiny.model.width, tiny.model.input_size, tiny.flips) == (0.125, (32, 48), False)
 
 
 def tiny_scale(**kw) -> Scale:
@@ -267,8 +269,8 @@ def test_robustness_a_end_to_end(sensed_dataset, checkpoints, tmp_path):
 
 
 def test_robustness_b_end_to_end_trains_missing_networks(sensed_dataset, tmp_path, capsys):
-    plan = TrainPlan(epochs=1, n_train=8, flips=False, seg_width=0.125, input_size=(32, 48),
-                     suffix="_tiny")  # fmt: skip
+    plan = TrainPlan(epochs=1, n_train=8, seg_n_train=8, flips=False, seg_width=0.125,
+                     input_size=(32, 48), suffix="_tiny")  # fmt: skip
     scale = tiny_scale(plan=plan, n_classify=6)
     report = run_robustness_b(sensed_dataset, tmp_path, scale=scale, seed=2, threads=1,
                               progress=False)  # fmt: skip
