@@ -115,6 +115,9 @@ class TorchTactileDataset(Dataset):
     faults : None, a :class:`FaultSpec`, or a callable ``(p (N,) Pa, rng) -> p (N,) Pa`` (rng as
         FaultSpec(per_sample=True, seed=0)). With faults, images (and label images) are
         recomputed from ``raw`` through ``pressure_from_raw``; without, the stored ones are used.
+    hand_only : keep only hand samples (``is_hand == 1``). None (default): True for "segment"
+        (the paper segments hand images only: a non-hand print has no parts to find), False for
+        "classify". Needs the ``is_hand`` field when True.
 
     Items: ``(image, target)``, image (1, h, w) float32 in [0, 1].
     """
@@ -127,6 +130,7 @@ class TorchTactileDataset(Dataset):
         size: tuple[int, int] | None = NET_SIZE,
         flips: bool = True,
         faults: FaultSpec | FaultFn | None = None,
+        hand_only: bool | None = None,
     ) -> None:
         if task not in TASKS:
             raise ConfigError(f"unknown task {task!r}; choices: {', '.join(TASKS)}")
@@ -134,10 +138,14 @@ class TorchTactileDataset(Dataset):
             raise ConfigError(f"unknown split {split!r}; choices: train, test, None (all)")
         self.reader = DatasetReader(path)
         self.task, self.size, self.flips, self.faults = task, size, flips, faults
+        self.hand_only = task == "segment" if hand_only is None else bool(hand_only)
         with self.reader:
             self._check_fields()
             n = len(self.reader)
-            self.indices = np.arange(n) if split is None else self.reader.splits[split]
+            indices = np.arange(n) if split is None else np.asarray(self.reader.splits[split])
+            if self.hand_only and "is_hand" in self.reader.fields:
+                indices = indices[self.reader.is_hand[:][indices] == 1]
+            self.indices = indices
         self._maps: dict[bytes, tuple[np.ndarray, TactileMap]] = {}
 
     def _check_fields(self) -> None:

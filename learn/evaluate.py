@@ -208,8 +208,9 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     """Test-split metrics (float and fast path) and CPU ms/image (1 thread by default) of a
     checkpoint (a .pt file; a classical model.npz goes to ``learn.classical.evaluate_classical``);
     a JSON-able dict (one row of the report)."""
+    from learn.breakdown import accuracy_by_active_taxels, active_taxel_counts
     from learn.checkpoint import load_checkpoint, model_from_checkpoint
-    from learn.folder import materialize, open_split
+    from learn.folder import is_dataset, materialize, open_split
 
     if Path(ckpt_path).suffix == ".npz":
         from learn.classical import evaluate_classical
@@ -219,10 +220,17 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     ckpt = load_checkpoint(ckpt_path)
     model, run = model_from_checkpoint(ckpt)
     hand = hand_classes or (ckpt.get("data") or {}).get("hand_classes")
-    test = materialize(open_split(Path(data_path), "test", run.task, run.model.input_size,
-                                  hand, run.train.seed), "test")  # fmt: skip
+    split = open_split(Path(data_path), "test", run.task, run.model.input_size, hand,
+                       run.train.seed)  # fmt: skip
+    test = materialize(split, "test")
     n_cls = run.model.num_classes
     ref = evaluate_tensors(model, test, n_cls)
+    by_size = None
+    if run.task == "classify" and is_dataset(data_path):  # accuracy by contact size
+        pred = logits_of(model, test.x).argmax(1).numpy()
+        names = list(ckpt.get("class_names") or [str(c) for c in range(n_cls)])
+        by_size = accuracy_by_active_taxels(pred, test.y.numpy(),
+                                            active_taxel_counts(data_path, split.indices), names)
     fast = fast_inference(model, check=test.x[:64])
     res = evaluate_tensors(fast, test, n_cls)
     if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
@@ -239,7 +247,7 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
             "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
             "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
             "config": ckpt["config"], "input_size": list(size),
-            "train_versions": ckpt.get("versions")}  # fmt: skip
+            "train_versions": ckpt.get("versions"), "by_active_taxels": by_size}  # fmt: skip
 
 
 def _fmt(v: float | None, scale: float = 1.0) -> str:
@@ -293,7 +301,17 @@ def _details(r: dict) -> list[str]:
             f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "",
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
-            confusion_markdown(torch.tensor(r["cm"]), names), ""]  # fmt: skip
+            confusion_markdown(torch.tensor(r["cm"]), names), "", *_by_size(r)]  # fmt: skip
+
+
+def _by_size(r: dict) -> list[str]:
+    """The accuracy-by-contact-size table of a classifier row on a handskin dataset."""
+    from learn.breakdown import breakdown_markdown
+
+    if not r.get("by_active_taxels"):
+        return []
+    return ["Accuracy by contact size (active taxels: pressure above the dataset's active "
+            "threshold):", "", *breakdown_markdown(r["by_active_taxels"]), ""]
 
 
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:

@@ -28,6 +28,8 @@ class HandsNet(nn.Module):
 
     ``(B, in_channels, H, W)`` float in [0, 1], ``(H, W) = input_size`` → ``(B, num_classes)``
     logits. The first fully connected layer's size depends on ``input_size`` (pixels).
+    ``zero_init_output`` starts the last layer's weights at zero instead of Glorot (*ours*: it
+    keeps Adam from killing the narrow ReLU head in its first steps).
     """
 
     task = "classification"
@@ -37,6 +39,7 @@ class HandsNet(nn.Module):
         num_classes: int = 2,
         in_channels: int = 1,
         input_size: tuple[int, int] = (68, 100),
+        zero_init_output: bool = False,
     ) -> None:
         super().__init__()
         self.num_classes, self.in_channels = num_classes, in_channels
@@ -59,6 +62,8 @@ class HandsNet(nn.Module):
             nn.Linear(32, num_classes),
         )
         init_weights(self)
+        if zero_init_output:
+            nn.init.zeros_(self.classifier[-1].weight)
 
     def _flat_size(self) -> int:
         """Length of the flattened feature map for ``input_size`` (found by a dry run)."""

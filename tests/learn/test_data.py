@@ -70,8 +70,20 @@ def test_classify_shapes_dtypes_and_split(path):
     np.testing.assert_allclose(ds[3][0][0].numpy(), want, atol=1e-6)
 
 
+def test_segment_keeps_hand_samples_only_by_default(path):
+    reader = open_dataset(path)
+    hands = np.flatnonzero(reader.is_hand[:] == 1)
+    assert 0 < len(hands) < N_SAMPLES
+    ds = TorchTactileDataset(path, split=None, task="segment", size=None, flips=False)
+    np.testing.assert_array_equal(ds.indices, hands)
+    every = TorchTactileDataset(path, split=None, task="segment", flips=False, hand_only=False)
+    assert len(every) == N_SAMPLES
+    hand_cls = TorchTactileDataset(path, split="test", task="classify", flips=False, hand_only=True)
+    assert set(reader.is_hand[:][hand_cls.indices]) == {1}
+
+
 def test_segment_targets_and_true_flips(path):
-    ds = TorchTactileDataset(path, split=None, task="segment", size=None)
+    ds = TorchTactileDataset(path, split=None, task="segment", size=None, hand_only=False)
     reader = open_dataset(path)
     assert len(ds) == 3 * N_SAMPLES
     for k in (1, 6):  # a hand sample (is_hand = k % 2)
@@ -83,7 +95,7 @@ def test_segment_targets_and_true_flips(path):
         np.testing.assert_array_equal(x2.numpy(), x0.numpy()[:, ::-1, :])
         np.testing.assert_array_equal(y1.numpy(), y0.numpy()[:, ::-1])
         np.testing.assert_array_equal(y2.numpy(), y0.numpy()[::-1, :])
-    resized = TorchTactileDataset(path, split=None, task="segment")
+    resized = TorchTactileDataset(path, split=None, task="segment", hand_only=False)
     x, y = resized[7]
     assert y.shape == (68, 100) and set(np.unique(y.numpy())) <= set(range(7))
     x6, x8 = resized[6][0].numpy(), resized[8][0].numpy()  # sample 2: original, vertical flip
@@ -126,10 +138,11 @@ def test_taxel_removal_rebuilds_the_map(path):
     reader = open_dataset(path)
     keep = nested_removal(reader.layout.n_taxels, [0.3], np.random.default_rng(2))[0]
     sub = TactileMap.build(reader.layout.subset(keep))
-    p = clean_pressure(path, 1)[keep]
+    i = int(ds.indices[1])  # the second hand sample (segmentation keeps hands only)
+    p = clean_pressure(path, i)[keep]
     x, y = ds[1]
     np.testing.assert_array_equal(x[0].numpy(), sub.image(p) / np.float32(255))
-    np.testing.assert_array_equal(y.numpy(), sub.label_image(p, reader.taxel_label[1][keep]))
+    np.testing.assert_array_equal(y.numpy(), sub.label_image(p, reader.taxel_label[i][keep]))
     assert ds.faulty_map()[1] is ds.faulty_map()[1]  # cached
 
 

@@ -96,8 +96,17 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     known = (paper.HANDSNET_ACCURACY_PCT, paper.HANDSNET_MS_PER_IMAGE, paper.SEGNET_ACC_PCT,
              paper.SEGNET_MIOU_PCT, paper.SEGNET_MS_PER_IMAGE)
     for needle in ("paper", *(f"{v:.2f}" for v in known), "unknown", "not run",
-                   f"{100 * clf['metrics']['accuracy']:.2f}", "% of each true class"):
+                   f"{100 * clf['metrics']['accuracy']:.2f}", "% of each true class",
+                   "Accuracy by contact size"):
         assert needle in text, needle
+    # the size breakdown re-adds to the confusion matrix's diagonal, class by class
+    per_bin = clf["by_active_taxels"]
+    for c, name in enumerate(clf["class_names"]):
+        n = sum(b["per_class"][name]["n"] for b in per_bin)
+        right = sum(b["per_class"][name]["n"] * (b["per_class"][name]["accuracy"] or 0)
+                    for b in per_bin)  # fmt: skip
+        assert n == sum(clf["cm"][c]) and round(right) == clf["cm"][c][c]
+    assert seg["by_active_taxels"] is None
 
 
 def test_plot_history(tmp_path):

@@ -102,6 +102,23 @@ def test_handsnet_is_table_1():
         HandsNet(input_size=(20, 100))
 
 
+def test_handsnet_zero_init_output_starts_every_image_at_even_odds():
+    from learn.config import HANDSNET, HANDSNET_PAPER
+
+    assert HANDSNET.model.zero_init_output and not HANDSNET_PAPER.model.zero_init_output
+    torch.manual_seed(0)
+    model = create_model("handsnet", **HANDSNET.model.kwargs()).eval()
+    last = model.classifier[-1]
+    assert torch.count_nonzero(last.weight) == 0 and torch.count_nonzero(last.bias) == 0
+    probs = model(torch.rand(4, 1, 68, 100)).softmax(1)
+    torch.testing.assert_close(probs, torch.full((4, 2), 0.5))
+    # the same layer is Glorot-random otherwise, and only the last layer is touched
+    other = create_model("handsnet", **HANDSNET_PAPER.model.kwargs())
+    assert torch.count_nonzero(other.classifier[-1].weight) == other.classifier[-1].weight.numel()
+    assert all(torch.count_nonzero(p) > 0 for n, p in model.named_parameters()
+               if n.endswith("weight") and not n.startswith("classifier.7"))  # fmt: skip
+
+
 def test_vgg16_layout_at_full_width():
     encoder = VGGEncoder(width=1.0)
     convs = [m for m in encoder.modules() if isinstance(m, nn.Conv2d)]

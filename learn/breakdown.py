@@ -1,0 +1,76 @@
+"""Classification accuracy by contact size: where a hand / non-hand classifier fails.
+
+A touch that presses a handful of taxels carries little shape; the paper reports one accuracy
+over all images. ``handskin evaluate`` adds, for a handskin dataset, the accuracy of each true
+class within bins of the number of active taxels (pressure above the dataset's active
+threshold), so a user sees which contacts cost the accuracy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from itertools import pairwise
+from pathlib import Path
+
+import numpy as np
+
+#: Lower edges of the active-taxel bins (count); the last bin is open.
+EDGES: tuple[int, ...] = (0, 10, 20, 40, 80)
+
+
+def accuracy_by_active_taxels(
+    pred: np.ndarray, truth: np.ndarray, n_active: np.ndarray,
+    class_names: Sequence[str], edges: Sequence[int] = EDGES,
+) -> list[dict[str, object]]:  # fmt: skip
+    """Per bin of active-taxel count: samples and accuracy (fraction) of each true class.
+
+    pred, truth : (S,) int class ids; n_active : (S,) int active taxels per sample.
+    Returns one dict per bin: ``{"lo", "hi" (None: open), "n", "per_class": {name: {"n",
+    "accuracy" (None when the bin has no sample of the class)}}}``.
+    """
+    pred, truth, n_active = (np.asarray(a).ravel() for a in (pred, truth, n_active))
+    if not len(pred) == len(truth) == len(n_active):
+        raise ValueError(f"pred, truth and n_active differ in length: "
+                         f"{len(pred)}, {len(truth)}, {len(n_active)}")  # fmt: skip
+    rows = []
+    bounds = [*edges, None]
+    for lo, hi in pairwise(bounds):
+        in_bin = (n_active >= lo) & (True if hi is None else n_active < hi)
+        per_class = {}
+        for c, name in enumerate(class_names):
+            m = in_bin & (truth == c)
+            acc = float(np.mean(pred[m] == c)) if m.any() else None
+            per_class[name] = {"n": int(m.sum()), "accuracy": acc}
+        rows.append({"lo": int(lo), "hi": None if hi is None else int(hi),
+                     "n": int(in_bin.sum()), "per_class": per_class})  # fmt: skip
+    return rows
+
+
+def active_taxel_counts(data_path: str | Path, indices: np.ndarray) -> np.ndarray:
+    """Active taxels (count, pressure above the dataset's active threshold) of samples
+    ``indices`` (S,) of a handskin dataset; (S,) int64."""
+    from learn.predict import active_threshold_pa
+    from tactile.dataset.reader import DatasetReader
+
+    with DatasetReader(data_path) as reader:
+        order = np.argsort(indices)
+        p = reader.pressure_pa[np.asarray(indices)[order]]
+        counts = (p > active_threshold_pa(reader)).sum(axis=1)
+    out = np.empty(len(indices), np.int64)
+    out[order] = counts
+    return out
+
+
+def breakdown_markdown(rows: list[dict]) -> list[str]:
+    """A markdown table of :func:`accuracy_by_active_taxels` (accuracy in %)."""
+    names = list(rows[0]["per_class"]) if rows else []
+    head = "| active taxels | " + " | ".join(f"{n}: samples | {n}: accuracy %" for n in names)
+    lines = [head + " |", "|---|" + "---|---|" * len(names)]
+    for r in rows:
+        span = f"{r['lo']}+" if r["hi"] is None else f"{r['lo']}–{r['hi'] - 1}"
+        cells = []
+        for n in names:
+            c = r["per_class"][n]
+            cells += [str(c["n"]), "–" if c["accuracy"] is None else f"{100 * c['accuracy']:.1f}"]
+        lines.append(f"| {span} | " + " | ".join(cells) + " |")
+    return lines
