@@ -301,7 +301,31 @@ def _details(r: dict) -> list[str]:
             f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "",
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
-            confusion_markdown(torch.tensor(r["cm"]), names), "", *_by_size(r)]  # fmt: skip
+            confusion_markdown(torch.tensor(r["cm"]), names), "",
+            *_by_size(r), *_merged(r)]  # fmt: skip
+
+
+#: Class groups of the 7-class hand-part segmentation the report also scores, (title, groups).
+MERGED_VIEWS = (
+    ("hand against background", [[0], [1, 2, 3, 4, 5, 6]]),
+    ("fingers as one class", [[0], [1, 2, 3, 4, 5], [6]]),
+    ("mirror pairs merged (index + pinkie, middle + ring)", [[0], [1], [2, 5], [3, 4], [6]]),
+)
+
+
+def _merged(r: dict) -> list[str]:
+    """Per-class IoU and the mIoU of coarser class groupings, of a 7-class segmenter row: how
+    much of the error is finger identity rather than finding the hand."""
+    if r["task"] != "segment" or len(r["cm"]) != 7:
+        return []
+    names = tuple(r["class_names"]) or tuple(str(i) for i in range(7))
+    ious = M.class_ious(torch.tensor(r["cm"]))
+    lines = ["IoU per class (%): " + ", ".join(
+        f"{n} {_fmt(float(v), 100)}" for n, v in zip(names, ious, strict=True)), "",
+        "mIoU (%) of coarser groupings of the same predictions:", ""]  # fmt: skip
+    for title, groups in MERGED_VIEWS:
+        lines.append(f"- {title}: {_fmt(M.mean_iou(M.merge_classes(r['cm'], groups)), 100)}")
+    return [*lines, ""]
 
 
 def _by_size(r: dict) -> list[str]:

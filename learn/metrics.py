@@ -94,6 +94,22 @@ def frequency_weighted_iou(cm: ArrayLike) -> float:
     return float((t_i * class_ious(cm).nan_to_num(0.0)).sum() / t_i.sum())
 
 
+def merge_classes(cm: ArrayLike, groups: list[list[int]]) -> torch.Tensor:
+    """The ``(G, G)`` confusion matrix of class groups: ``out[a, b] = Σ cm[groups[a], groups[b]]``.
+
+    Every class must be in exactly one group (e.g. ``[[0], [2, 5], ...]`` scores index and
+    pinkie as one class).
+    """
+    cm = torch.as_tensor(np.asarray(cm), dtype=torch.int64)
+    flat = sorted(c for g in groups for c in g)
+    if flat != list(range(cm.shape[0])):
+        raise DataError(f"groups {groups} must hold each class 0..{cm.shape[0] - 1} once")
+    onehot = torch.zeros(cm.shape[0], len(groups), dtype=torch.int64)
+    for a, g in enumerate(groups):
+        onehot[g, a] = 1
+    return onehot.T @ cm @ onehot
+
+
 def segmentation_scores(cm: ArrayLike) -> dict[str, float]:
     """The four scores of Long et al. (fractions in [0, 1]) from one confusion matrix."""
     return {

@@ -15,6 +15,7 @@ from learn.metrics import (
     frequency_weighted_iou,
     mean_class_accuracy,
     mean_iou,
+    merge_classes,
     percent_by_true_class,
     pixel_accuracy,
     segmentation_scores,
@@ -96,3 +97,19 @@ def test_time_per_image_is_positive_and_leaves_eval_mode():
     seconds = time_per_image(model, (12, 10), "cpu", n_warmup=2, n_runs=5)
     assert 0 < seconds < 1
     assert not model.training
+
+
+def test_merged_classes_equal_relabelled_predictions():
+    """Merging classes of a confusion matrix equals relabelling truth and prediction first."""
+    rng = np.random.default_rng(3)
+    truth, pred = rng.integers(0, 7, 5000), rng.integers(0, 7, 5000)
+    groups = [[0], [1], [2, 5], [3, 4], [6]]
+    relabel = np.zeros(7, np.int64)
+    for a, g in enumerate(groups):
+        relabel[g] = a
+    want = np.zeros((5, 5), np.int64)
+    np.add.at(want, (relabel[truth], relabel[pred]), 1)
+    cm = confusion_matrix(torch.from_numpy(truth), torch.from_numpy(pred), 7)
+    np.testing.assert_array_equal(merge_classes(cm, groups).numpy(), want)
+    with pytest.raises(DataError, match="once"):
+        merge_classes(cm, [[0, 1], [1, 2, 3, 4, 5, 6]])
