@@ -97,7 +97,8 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
              paper.SEGNET_MIOU_PCT, paper.SEGNET_MS_PER_IMAGE)
     for needle in ("paper", *(f"{v:.2f}" for v in known), "unknown", "not run",
                    f"{100 * clf['metrics']['accuracy']:.2f}", "% of each true class",
-                   "Accuracy by contact size"):
+                   "Accuracy by contact size", "mIoU (%) of coarser groupings",
+                   "mirror pairs merged"):
         assert needle in text, needle
     # the size breakdown re-adds to the confusion matrix's diagonal, class by class
     per_bin = clf["by_active_taxels"]
