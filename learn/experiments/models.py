@@ -56,11 +56,26 @@ def ensure_model(
             raise DataError(f"no checkpoint at {checkpoint}. Fix: a .pt file from handskin train")
         return checkpoint
     out = Path(models_dir) / (name or arch)
-    if (out / "best.pt").is_file():
-        print(f"reusing {out / 'best.pt'}")
-        return out / "best.pt"
     run = run if run is not None else preset_run(arch, epochs=epochs, seed=seed)
     if run.model.arch != arch:
         run = dataclasses.replace(run, model=dataclasses.replace(run.model, arch=arch))
+    if (out / "best.pt").is_file():
+        _check_reusable(out / "best.pt", run)
+        print(f"reusing {out / 'best.pt'}")
+        return out / "best.pt"
     fit(run, load_data(data, run, progress=progress), out, progress=progress)
     return out / "best.pt"
+
+
+def _check_reusable(path: Path, run) -> None:
+    """Raise unless the checkpoint at ``path`` was trained with ``run``'s configuration."""
+    from learn.checkpoint import load_checkpoint
+    from learn.train import run_from_dict
+
+    stored = run_from_dict(load_checkpoint(path)["config"])
+    if stored != run:
+        raise ConfigError(
+            f"{path} was trained with another configuration than this experiment asks for "
+            f"(stored {stored.model.arch} {stored.train}, asked {run.model.arch} {run.train}). "
+            "Fix: give another --models folder, or delete that folder to retrain"
+        )
