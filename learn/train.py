@@ -122,16 +122,24 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
                            desc=f"epoch {epoch + 1}/{run.train.epochs}", leave=False)  # fmt: skip
     for start in bar:
         x, y = get_batch(data, order[start : start + run.train.batch_size], n_views)
-        if run.task == "classify":
-            x = x.contiguous(memory_format=torch.channels_last)
-        loss = loss_fn(model(x), y)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
-        value = loss.item()
+        value = train_step(model, loss_fn, optimizer, x, y, run.task)
         total += value * len(y)
         bar.set_postfix(loss=f"{value:.4f}")
     return total / len(order)
+
+
+def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task: str) -> float:
+    """One optimisation step on images ``x`` (B, 1, h, w) and targets ``y``; returns the loss.
+
+    Classifiers get channels-last input (their weights are channels-last, see :func:`build`).
+    """
+    if task == "classify":
+        x = x.contiguous(memory_format=torch.channels_last)
+    loss = loss_fn(model(x), y)
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    optimizer.step()
+    return loss.item()
 
 
 def build(run: RunConfig, init_from: str | Path | None = None):

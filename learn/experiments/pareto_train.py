@@ -45,7 +45,7 @@ def train_budgeted(run, train, budget_s: float, max_steps: float, init_from=None
     import torch
     from tqdm.auto import tqdm
 
-    from learn.train import N_VIEWS, build, get_batch, make_loss
+    from learn.train import N_VIEWS, build, get_batch, make_loss, train_step
 
     torch.set_num_threads(run.threads)
     model, optimizer, _ = build(run, init_from)
@@ -58,12 +58,7 @@ def train_budgeted(run, train, budget_s: float, max_steps: float, init_from=None
         if steps >= max_steps or time.perf_counter() - t0 >= budget_s:
             break
         x, y = get_batch(train, items, n_views)
-        if run.task == "classify":
-            x = x.contiguous(memory_format=torch.channels_last)
-        loss = loss_fn(model(x), y)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
+        train_step(model, loss_fn, optimizer, x, y, run.task)
         steps, images = steps + 1, images + len(y)
         bar.update(min(round(time.perf_counter() - t0), bar.total) - bar.n)
     bar.close()
