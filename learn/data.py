@@ -200,7 +200,8 @@ class TorchTactileDataset(Dataset):
     def pressure(self, i: int) -> np.ndarray:
         """Sample i's pressures (N,) float64, Pa, from its raw readings, faults applied."""
         ds = self.reader
-        p = ds.pressure_from_raw(ds.raw[i])
+        t = float(ds.time_s[i]) if "time_s" in ds.fields else None
+        p = ds.pressure_from_raw(ds.raw[i], t)
         if self.faults is None:
             return p
         if isinstance(self.faults, FaultSpec):

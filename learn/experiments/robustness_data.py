@@ -5,9 +5,9 @@ dataset's images were made from, a split held in memory, and network inputs made
     images = test.tmap.image(test.pressure_pa[:64])   # (64, H, W) uint8, the stored pipeline
     x = net_inputs(images, (68, 100))                 # (64, 1, 68, 100) float32 in [0, 1]
 
-The generator images ``(reading - baseline - drift * t)`` with readings less than 3 noise sd
-above the baseline set to 0, over the nominal gain; ``DatasetReader.pressure_from_raw`` applies
-neither the floor nor the drift, so :class:`Readout` does, from the dataset's attributes.
+Pressures come from ``DatasetReader.pressure_from_raw`` with the frames' ``time_s``: the
+generator's own readout (baseline, drift, 3-sigma noise floor, nominal gain), so frames at zero
+corruption give the stored images (`stored_agreement` measures it; tactile.dataset.readout).
 """
 
 from __future__ import annotations
@@ -24,8 +24,6 @@ from tactile.layout import TaxelLayout
 from tactile.resize import resize_image, resize_labels
 from tactile.tactile_map import TactileMap
 
-#: The generator reads counts less than this many noise sd above the untouched reading as 0.
-NOISE_FLOOR_SIGMAS = 3.0
 #: First spawn-key element of each random stream derived from the one --seed (kept disjoint).
 KEY_SUBSET, KEY_SPOTS, KEY_REMOVAL, KEY_POOL, KEY_COPIES = 1, 2, 3, 4, 5
 CHUNK = 128  # frames imaged at once (a 229 x 383 float64 batch of 128 is 90 MB)
@@ -34,42 +32,6 @@ CHUNK = 128  # frames imaged at once (a 229 x 383 float64 batch of 128 is 90 MB)
 def stream(seed: int, *key: int) -> np.random.Generator:
     """The generator of one random stream: ``SeedSequence(seed, spawn_key=key)``."""
     return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=tuple(map(int, key))))
-
-
-@dataclass(frozen=True)
-class Readout:
-    """How raw counts become the pressures (Pa) the dataset's images were made from.
-
-    gain_counts_per_pa : float, counts/Pa. baseline_counts : () or (N,) float, counts.
-    drift_counts_per_s : () or (N,) float, counts/s (attr ``skin_drift_counts_per_s``; 0 if the
-    dataset does not store it). floor_counts : float, counts — signals at or below it read 0.
-    """
-
-    gain_counts_per_pa: float
-    baseline_counts: np.ndarray
-    drift_counts_per_s: np.ndarray
-    floor_counts: float
-
-    @classmethod
-    def of(cls, reader: DatasetReader) -> Readout:
-        """The readout of a dataset: root attrs, noise sd from ``config.episode.skin``."""
-        attrs = reader.attrs
-        config = attrs.get("config") if isinstance(attrs.get("config"), dict) else {}
-        skin = (config.get("episode") or {}).get("skin") or {}
-        floor = NOISE_FLOOR_SIGMAS * float(skin.get("noise_std_counts", 0.0))
-        return cls(
-            float(attrs.get("skin_counts_per_pa", 1.0)),
-            np.asarray(attrs.get("skin_baseline_counts", 0.0), dtype=np.float64),
-            np.asarray(attrs.get("skin_drift_counts_per_s", 0.0), dtype=np.float64),
-            floor,
-        )
-
-    def pressure_pa(self, raw: np.ndarray, time_s: np.ndarray | None = None) -> np.ndarray:
-        """Pressures (B, N) float64, Pa, from raw counts (B, N) read at times ``time_s`` (B,) s."""
-        t = np.zeros(len(raw)) if time_s is None else np.asarray(time_s, dtype=np.float64)
-        signal = np.asarray(raw, dtype=np.float64) - self.baseline_counts
-        signal -= self.drift_counts_per_s * t[:, None]
-        return np.where(signal > self.floor_counts, signal, 0.0) / self.gain_counts_per_pa
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,7 +121,7 @@ def read_rows(reader: DatasetReader, ids: np.ndarray) -> dict[str, np.ndarray]:
     n = raw.shape[1]
     has_labels = "taxel_label" in reader.fields
     labels = reader.taxel_label[sorted_ids][back] if has_labels else np.zeros((len(ids), n))
-    return {"pressure": Readout.of(reader).pressure_pa(raw, time_s),
+    return {"pressure": reader.pressure_from_raw(raw, time_s),
             "taxel_label": labels.astype(np.uint8)}  # fmt: skip
 
 

@@ -100,9 +100,10 @@ def setup_markdown(data, frames, agreement: dict, info: list[dict], scale: Scale
         f"{'all ' if n_clf == frames.n_split else 'a fixed-seed subset of '}{n_clf}, "
         f"segmentation on a fixed-seed subset of {n_seg} test hand samples (both drawn from "
         "--seed). Every pattern is drawn from --seed; its index is in results.json.", "",
-        "Images are regenerated from the raw readings (baseline, drift where stored and the "
-        "generator's 3-sigma noise floor removed, over the nominal gain) through the corrupted "
-        "map with `TactileMap.image`; label images with `tactile.labels.label_image`. Against "
+        "Images are regenerated from the raw readings (`DatasetReader.pressure_from_raw`: "
+        "baseline, drift and the generator's 3-sigma noise floor removed, over the nominal gain) "
+        "through the corrupted map with `TactileMap.image`; label images with "
+        "`tactile.labels.label_image`. Against "
         f"the stored images at zero corruption: {100 * agreement['identical_images']:.1f} % "
         f"identical, {100 * agreement['differing_pixels']:.3f} % of pixels differ (at most "
         f"{agreement['max_grey_difference']} grey levels), "
@@ -123,10 +124,10 @@ def setup_markdown(data, frames, agreement: dict, info: list[dict], scale: Scale
 
 
 DRIFT_NOTE = (
-    " The raw readings do not fully determine the pressures the stored images were made from "
-    "(counts are quantised, and the per-taxel baseline drift is not stored unless the attr "
-    "`skin_drift_counts_per_s` is): a frame's largest reading can move by a count or more (one "
-    "grey level) and readings near the noise floor may cross it."
+    " Datasets written before the generator stored the per-taxel baseline drift (root attr "
+    "`skin_drift_counts_per_s`) are regenerated without it: a frame's largest reading can move by "
+    "a count or so (one grey level) and readings near the noise floor may cross it. "
+    "Regenerating the dataset with this version stores it."
 )
 
 

@@ -30,6 +30,8 @@ PACKAGES = ("numpy", "h5py", "scipy", "scikit-image", "mujoco", "handskin")
 ATTR_DOCS = {
     "skin_counts_per_pa": "float, counts/Pa: nominal skin gain (pressure_from_raw)",
     "skin_baseline_counts": "float or (N,) float, counts: untouched reading (pressure_from_raw)",
+    "skin_drift_counts_per_s": "float or (N,) float, counts/s: baseline drift (pressure_from_raw)",
+    "skin_noise_floor_counts": "float, counts: signals at or below it read 0 (pressure_from_raw)",
     "actions": "list of str: names of the `action` indices",
 }
 

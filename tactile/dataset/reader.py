@@ -19,6 +19,7 @@ import numpy as np
 
 from tactile.dataset import h5io
 from tactile.dataset.merge import DATASET, INFO
+from tactile.dataset.readout import Readout
 from tactile.dataset.schema import BY_NAME, FIELDS, STR
 from tactile.errors import DataError
 from tactile.layout import TaxelLayout
@@ -150,29 +151,35 @@ class DatasetReader:
         except (OSError, ValueError) as err:
             raise DataError(f"cannot read {path}: {err}. Fix: re-run the merge") from err
 
-    def pressure_from_raw(self, raw: np.ndarray) -> np.ndarray:
-        """Pressure from raw readings: max(raw - skin_baseline_counts, 0) / skin_counts_per_pa.
+    @cached_property
+    def readout(self) -> Readout:
+        """How this dataset's raw counts become pressures (`tactile.dataset.readout`)."""
+        return Readout.of(self.attrs)
 
-        raw : (N,) or (B, N) counts. Returns the same shape, float64, Pa. Uses the root attrs
-        ``skin_counts_per_pa`` (float, counts/Pa; 1.0 when absent, giving counts) and
-        ``skin_baseline_counts`` (float or (N,) float, counts; 0 when absent). Per-taxel gain
-        spread and drift are not undone (they are not stored).
+    def pressure_from_raw(
+        self, raw: np.ndarray, time_s: np.ndarray | float | None = None
+    ) -> np.ndarray:
+        """Pressure from raw readings, as the generator imaged them: ``raw - baseline - drift *
+        time_s``, signals at or below the noise floor read 0, over the nominal gain.
+
+        raw : (N,) or (B, N) counts. time_s : the frames' times (scalar or (B,), s; the field
+        ``time_s``); None removes no drift. Returns the shape of ``raw``, float64, Pa. The root
+        attrs that say how are listed in `tactile.dataset.readout`; per-taxel gain spread is not
+        undone (a robot does not know it).
         """
-        attrs = self.file.attrs
-        gain = float(attrs.get("skin_counts_per_pa", 1.0))
-        base = np.asarray(attrs.get("skin_baseline_counts", 0.0), dtype=np.float64)
-        return np.maximum(np.asarray(raw, dtype=np.float64) - base, 0.0) / gain
+        return self.readout.pressure_pa(raw, time_s)
 
     def images_from_raw(
-        self, raw: np.ndarray, tmap: TactileMap | None = None, keep: np.ndarray | None = None
+        self, raw: np.ndarray, tmap: TactileMap | None = None, keep: np.ndarray | None = None,
+        time_s: np.ndarray | float | None = None,
     ) -> np.ndarray:
         """Tactile images recomputed from raw readings through a (possibly corrupted) map.
 
         raw : (N,) or (B, N) counts. tmap : the map to use (default: the dataset's). keep :
-        (K,) taxel indices when ``tmap`` was built from ``layout.subset(keep)``. Returns (H, W)
-        or (B, H, W) uint8 with (H, W) = tmap.shape.
+        (K,) taxel indices when ``tmap`` was built from ``layout.subset(keep)``. time_s : as in
+        `pressure_from_raw`. Returns (H, W) or (B, H, W) uint8 with (H, W) = tmap.shape.
         """
-        p = self.pressure_from_raw(raw)
+        p = self.pressure_from_raw(raw, time_s)
         if keep is not None:
             p = p[..., np.asarray(keep)]
         return (self.map if tmap is None else tmap).image(p)

@@ -18,7 +18,7 @@ from learn.experiments.fault_aware import (
     register,
     run_fault_aware,
 )
-from learn.experiments.robustness_data import KEY_REMOVAL, Readout, stream
+from learn.experiments.robustness_data import KEY_REMOVAL, stream
 from learn.experiments.robustness_faults import (
     FaultMix,
     augmented_data,
@@ -40,7 +40,7 @@ def hand_frame(tiny_dataset):
     """(map, layout, p (N,) Pa, taxel labels (N,)) of the first hand sample."""
     ds = open_dataset(tiny_dataset)
     i = int(np.flatnonzero(ds.is_hand[:])[0])
-    p = Readout.of(ds).pressure_pa(ds.raw[i : i + 1])[0]
+    p = ds.pressure_from_raw(ds.raw[i])
     return ds.map, ds.layout, p, ds.taxel_label[i]
 
 

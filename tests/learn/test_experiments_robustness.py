@@ -23,7 +23,6 @@ from learn.evaluate import evaluate_tensors
 from learn.experiments import robustness_eval as E
 from learn.experiments.robustness import register, run_robustness_a, run_robustness_b
 from learn.experiments.robustness_data import (
-    Readout,
     images,
     load_frames,
     net_inputs,
@@ -103,12 +102,6 @@ def test_readout_reproduces_the_stored_images(sensed_dataset):
     agree = stored_agreement(sensed_dataset, frames)
     assert agree["identical_images"] == 1.0 and agree["differing_label_pixels"] == 0.0
     assert (frames.is_hand[frames.segment] == 1).all()
-
-
-def test_readout_without_skin_attrs_is_pressure_from_raw(tiny_dataset):
-    ds = open_dataset(tiny_dataset)
-    raw = ds.raw[:]
-    assert np.array_equal(Readout.of(ds).pressure_pa(raw), ds.pressure_from_raw(raw))
 
 
 def test_subsets_are_seeded_and_sized(sensed_dataset):

@@ -50,6 +50,28 @@ def test_two_workers_give_the_same_bytes_as_one(reference: Path, tmp_path: Path)
     assert sha256(tmp_path / "w2" / "dataset.h5") == sha256(reference / "dataset.h5")
 
 
+def test_images_regenerated_from_raw_readings_equal_the_stored_ones(reference: Path) -> None:
+    """The reference is the generator's own images: raw counts, the frame times and the stored
+    skin attrs (baseline, drift, noise floor, gain) must give them back bit for bit."""
+    with open_dataset(reference) as ds:
+        attrs = ds.attrs
+        assert np.abs(attrs["skin_drift_counts_per_s"]).max() > 0  # drift really is removed
+        assert attrs["skin_noise_floor_counts"] == 3 * small().episode.skin.noise_std_counts
+        raw, t, stored = ds.raw[:], ds.time_s[:], ds.image[:]
+        np.testing.assert_array_equal(ds.images_from_raw(raw, time_s=t), stored)
+        untouched = ds.pressure_from_raw(np.rint(attrs["skin_baseline_counts"]).astype(np.uint16))
+        assert not untouched.any()  # the bare noise-free baseline reads 0 Pa
+    pytest.importorskip("torch")
+    from learn.data import FaultSpec, TorchTactileDataset
+
+    # learn's fault path images from raw readings too: with no fault it must see the same images
+    plain = TorchTactileDataset(reference, split=None, task="classify", flips=False)
+    faulty = TorchTactileDataset(reference, split=None, task="classify", flips=False,
+                                 faults=FaultSpec())  # fmt: skip
+    for i in range(len(plain)):
+        np.testing.assert_array_equal(faulty[i][0].numpy(), plain[i][0].numpy())
+
+
 def test_dataset_content_classes_subjects_and_split(reference: Path) -> None:
     with open_dataset(reference) as ds:
         is_hand = ds["is_hand"][()]

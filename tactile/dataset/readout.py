@@ -1,0 +1,76 @@
+"""Raw skin readings back to the pressures a dataset's images were made from.
+
+    ro = Readout.of(attrs)                       # from a dataset's root attributes
+    p = ro.pressure_pa(raw, time_s)              # (B, N) counts, (B,) s -> (B, N) Pa
+
+The generator (`sim.episode_frames.sensed_pressure`) images ``reading - baseline - drift * t``,
+with signals at or below the noise floor (3 noise sd) read as 0, over the nominal gain (the
+per-taxel gain spread is unknown to a robot, so it is not undone). A dataset stores what that
+takes as root attributes; with all of them stored, the images regenerated from ``raw`` and
+``time_s`` equal the stored ones (tests/sim/test_generate.py).
+
+Attributes (all optional; a missing one is the identity):
+- ``skin_counts_per_pa`` : float, counts/Pa (1.0: pressures in counts);
+- ``skin_baseline_counts`` : float or (N,) float, counts (0);
+- ``skin_drift_counts_per_s`` : float or (N,) float, counts/s (0);
+- ``skin_noise_floor_counts`` : float, counts (0). Datasets generated before this attribute
+  existed give it as ``config.episode.skin.noise_std_counts`` times `NOISE_FLOOR_SIGMAS`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from tactile.errors import DataError
+
+#: The generator reads signals less than this many noise sd above the untouched reading as 0.
+NOISE_FLOOR_SIGMAS = 3.0
+
+
+@dataclass(frozen=True)
+class Readout:
+    """How raw counts become pressures (Pa).
+
+    gain_counts_per_pa : float, counts/Pa. baseline_counts, drift_counts_per_s : () or (N,)
+    float, counts and counts/s. floor_counts : float, counts — signals at or below it read 0.
+    """
+
+    gain_counts_per_pa: float = 1.0
+    baseline_counts: np.ndarray | float = 0.0
+    drift_counts_per_s: np.ndarray | float = 0.0
+    floor_counts: float = 0.0
+
+    @classmethod
+    def of(cls, attrs: Mapping[str, object]) -> Readout:
+        """The readout described by a dataset's decoded root attributes (see module doc)."""
+        floor = attrs.get("skin_noise_floor_counts")
+        if floor is None:
+            config = attrs.get("config") if isinstance(attrs.get("config"), dict) else {}
+            skin = (config.get("episode") or {}).get("skin") or {}
+            floor = NOISE_FLOOR_SIGMAS * float(skin.get("noise_std_counts", 0.0))
+        gain = float(attrs.get("skin_counts_per_pa", 1.0))
+        if not gain > 0:
+            raise DataError(f"skin_counts_per_pa = {gain} must be > 0 counts/Pa. Fix: re-ingest "
+                            "the recording with its skin's gain (--counts-per-pa)")
+        return cls(
+            gain,
+            np.asarray(attrs.get("skin_baseline_counts", 0.0), dtype=np.float64),
+            np.asarray(attrs.get("skin_drift_counts_per_s", 0.0), dtype=np.float64),
+            float(floor),
+        )
+
+    def pressure_pa(self, raw: np.ndarray, time_s: np.ndarray | float | None = None) -> np.ndarray:
+        """Pressures, Pa, float64, shaped as ``raw``.
+
+        raw : (N,) or (B, N) counts. time_s : the frames' times in their episodes, s — a scalar,
+        or (B,) for a batch; None reads them as 0 (no drift removed).
+        """
+        raw = np.asarray(raw, dtype=np.float64)
+        t = np.asarray(0.0 if time_s is None else time_s, dtype=np.float64)
+        if raw.ndim == 2 and t.ndim == 1:
+            t = t[:, None]
+        signal = raw - self.baseline_counts - self.drift_counts_per_s * t
+        return np.where(signal > self.floor_counts, signal, 0.0) / self.gain_counts_per_pa
