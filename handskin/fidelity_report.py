@@ -102,7 +102,9 @@ def settings_table(rows: list[dict], knob_headers: Sequence[str], segnet: bool) 
 
 
 def _knob(v: object) -> object:
-    return ("yes" if v else "no") if isinstance(v, bool) else float(v)
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    return v if isinstance(v, str) else float(v)
 
 
 def speed_figure(rows: list[dict], key: str, ylabel: str, default: str, chosen: str | None,

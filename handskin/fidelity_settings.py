@@ -14,6 +14,8 @@ The knobs that exist (docs/fidelity.md says why the others are not swept):
   unitless; 0.5 simulates half the time (the "sequence length" of the issue).
 - ``keep_sequences`` — also simulate the release and store the 10 Hz sequence; the selected frame
   (hence the image) is the same as without it, so it is pure cost for a single-frame model.
+- ``hand_detail`` — "coarse" drops the palm's metacarpal and heel capsules (`sim.hand`).
+- ``episode.solver_iterations`` — MuJoCo's cap on solver iterations per step (default 100).
 
 The richest setting (`RICHEST`) also gives the shared test set (its dataset's test split).
 """
@@ -46,6 +48,9 @@ SETTINGS: tuple[FidelitySetting, ...] = (
                     "half-length presses, no skin spread"),
     FidelitySetting("short", {"duration_scale": 0.5}, "half-length presses"),
     FidelitySetting("no_spread", {"episode.skin.spread_sigma_m": 0.0}, "no skin spread"),
+    FidelitySetting("coarse_hand", {"hand_detail": "coarse"},
+                    "palm of two flat boxes (no metacarpal or heel capsules)"),
+    FidelitySetting("solver_1", {"episode.solver_iterations": 1}, "1 solver iteration per step"),
     FidelitySetting("default", {}, "GenerateConfig defaults"),
     FidelitySetting("sequences", {"keep_sequences": True},
                     "release simulated, 10 Hz sequence stored"),
@@ -62,6 +67,8 @@ KNOB_COLUMNS: tuple[tuple[str, str, float], ...] = (
     ("skin spread σ (mm)", "episode.skin.spread_sigma_m", 1e3),
     ("press length (× default)", "duration_scale", 1.0),
     ("sequences kept", "keep_sequences", 1.0),
+    ("solver iterations (cap)", "episode.solver_iterations", 1.0),
+    ("hand detail", "hand_detail", 1.0),
 )
 
 
@@ -105,7 +112,7 @@ def knob_values(cfg: GenerateConfig) -> list[object]:
         value: object = cfg
         for part in key.split("."):
             value = getattr(value, part)
-        out.append(value if isinstance(value, bool) else float(value) * scale)
+        out.append(value if isinstance(value, bool | str) else float(value) * scale)
     return out
 
 

@@ -56,6 +56,9 @@ class EpisodeConfig:
 
     part: str = "forearm"  # `sim.parts.get_part` name
     timestep_s: float = 0.005  # implicitfast + soft tissue (solref 10 ms, 2 steps) stable at 5 ms
+    # MuJoCo's cap on constraint-solver iterations per step (opt.iterations; Newton solver). The
+    # forearm's presses take 1.1 on average and at most 4 (docs/fidelity.md), so 100 never binds.
+    solver_iterations: int = 100
     skin: SkinConfig = field(default_factory=SkinConfig)
     skin_seed: int = 0  # draws of the one physical skin (gain, baseline, drift) of a dataset
     active_pa: float = 500.0  # a taxel is active above this noise-free pressure (~3 noise sd), Pa
@@ -93,7 +96,8 @@ class EpisodeContext:
         if key in self._cache:
             self._cache.move_to_end(key)
             return self._cache[key]
-        scene = press.build_press_scene(self.part, contactor, self.cfg.timestep_s)
+        scene = press.build_press_scene(self.part, contactor, self.cfg.timestep_s,
+                                        self.cfg.solver_iterations)  # fmt: skip
         self._cache[key] = scene
         if len(self._cache) > self.cfg.cache_size:
             self._cache.popitem(last=False)

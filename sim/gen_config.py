@@ -37,6 +37,7 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "duration_scale": (0.1, 2.0),
     "sequence_frames": (1, 600),
     "episode.timestep_s": (1e-4, 0.01),
+    "episode.solver_iterations": (1, 1000),
     "episode.skin_seed": (0, 2**63 - 1),
     "episode.active_pa": (0.0, 1e6),
     "episode.max_attempts": (1, 100),
@@ -70,6 +71,9 @@ class GenerateConfig:
     # (reserved spawn key), so the same seed gives the same people whatever n is.
     n_subjects: int = 90
     instances_per_kind: int = 20  # object / body-part instances per type (`sim.nonhand`)
+    # Collision detail of the hands (`sim.hand.HAND_DETAILS`): "full" (metacarpal and heel
+    # capsules round the palm) or "coarse" (the palm is two flat boxes); fingers are the same.
+    hand_detail: str = "full"
     # Multiplier on every press plan's phase durations (approach, load, hold, release),
     # unitless; 1 = the interaction models' own timing, < 1 for quick smoke tests (`sim.tiny`).
     duration_scale: float = 1.0
@@ -81,6 +85,11 @@ class GenerateConfig:
         for name, (lo, hi) in RANGES.items():
             check_range(name, _get(self, name), lo, hi)
         check_part(self.part)
+        from sim.hand import HAND_DETAILS
+
+        if self.hand_detail not in HAND_DETAILS:
+            raise ConfigError(f"hand_detail = {self.hand_detail!r} unknown; choose one of "
+                              f"{', '.join(HAND_DETAILS)}")  # fmt: skip
         if self.episode.part not in (self.part, EpisodeConfig.part):
             raise ConfigError(
                 f"episode.part = {self.episode.part!r} differs from part = {self.part!r}; "

@@ -74,6 +74,11 @@ from tactile.errors import ConfigError
 
 HAND_PARTS: tuple[str, ...] = ("thumb", "index", "middle", "ring", "pinkie", "palm")  # ids 1..6
 SIDES: tuple[str, ...] = ("right", "left")
+# Collision detail of the palm. "full": per half, two metacarpal capsules, a transverse heel
+# capsule and a flat box between the metacarpals (the knuckle ridge and heel print rounded);
+# "coarse": the boxes alone (a flat rectangular palm print, 6 fewer geoms). Fingers, thumb,
+# thenar eminence, joints and actuators are the same in both.
+HAND_DETAILS: tuple[str, ...] = ("full", "coarse")
 HAND_LENGTH_RANGE_M = (0.15, 0.22)  # Albini & Cannata 2020: 90 volunteers, 15-22 cm
 BREADTH_RATIO_RANGE = (0.38, 0.52)  # breadth / length
 TISSUE_DEPTH_RANGE_M = (0.0015, 0.006)  # soft-tissue allowance (solimp width), metres
@@ -104,6 +109,7 @@ class HandConfig:
     strength: float = 1.0  # multiplier of the finger joint torque limits (1 = moderate grip)
     root_force_n: float = 40.0  # force limit of the root slide actuators (pressing force), N
     root_torque_nm: float = 4.0  # torque limit of the root hinge actuators, N m
+    detail: str = "full"  # collision detail of the palm, one of `HAND_DETAILS`
 
     def __post_init__(self) -> None:
         if self.breadth_m is None:
@@ -117,6 +123,9 @@ class HandConfig:
         _check("root_torque_nm", self.root_torque_nm, (0.01, 50.0))
         if self.side not in SIDES:
             raise ConfigError(f"HandConfig.side={self.side!r} unknown; choose one of {SIDES}")
+        if self.detail not in HAND_DETAILS:
+            raise ConfigError(f"HandConfig.detail={self.detail!r} unknown; choose one of "
+                              f"{HAND_DETAILS}")  # fmt: skip
 
     @property
     def prefix(self) -> str:
@@ -265,8 +274,13 @@ class _Builder:
         geom.solimp = [0.0, 0.99, width, 0.5, 2.0]
 
     def _palm_geoms(self, body, fingers: tuple[str, str], heel: tuple[float, float]) -> None:
-        """Metacarpal capsules of two fingers and a transverse heel capsule (y / breadth)."""
+        """Metacarpal capsules of two fingers and a transverse heel capsule (y / breadth) at
+        full detail; the flat box between the metacarpals at every detail."""
         geo = self.geo
+        if self.cfg.detail == "coarse":
+            self._palm_box(body, "radial" if heel[0] > 0 else "ulnar",
+                           [geo.cmc_m[f] for f in fingers], [geo.mcp_m[f] for f in fingers])
+            return
         for f in fingers:
             r = geo.radii_m[f][0]
             self._capsule(body, "palm", f"{f}_metacarpal", geo.cmc_m[f], geo.mcp_m[f], r)

@@ -101,6 +101,8 @@ def _hand_contactor(subject: Subject) -> ContactorSpec:
     spec.attach(hand, frame=root.add_frame(pos=-palm_centre_m(subject)), prefix=HAND_PREFIX)
     desc = {"type": f"{cfg.side}_hand", "length_m": cfg.length_m, "breadth_m": cfg.breadth_m,
             "tissue_depth_m": cfg.tissue_depth_m, "subject": subject.subject_id}
+    if cfg.detail != "full":  # the default hand's description (and dataset bytes) stay as they were
+        desc["detail"] = cfg.detail
     return ContactorSpec(
         spec, labels, "hand", f"{cfg.side}_hand", instance_id=-1,
         subject_id=int(subject.subject_id.lstrip("s") or -1), description=desc,

@@ -89,11 +89,15 @@ def _add_root(spec: mujoco.MjSpec, tilt_kp: float = TILT_KP) -> None:
         act.set_to_position(kp=kp, dampratio=1.0)
 
 
-def scene_spec(part: Part, contactor: ContactorSpec, timestep_s: float) -> mujoco.MjSpec:
-    """The press scene spec: options, the part, the contactor under the ``press`` body."""
+def scene_spec(
+    part: Part, contactor: ContactorSpec, timestep_s: float, solver_iterations: int = 100
+) -> mujoco.MjSpec:
+    """The press scene spec: options (time step, s; the solver's iteration cap), the part, the
+    contactor under the ``press`` body."""
     spec = mujoco.MjSpec()
     spec.modelname = f"{part.name}_press_{contactor.name}"
     set_hand_options(spec, timestep_s)
+    spec.option.iterations = int(solver_iterations)
     spec.option.gravity = [0.0, 0.0, 0.0]  # forces are the commanded ones
     add_part(spec, part)
     press = spec.worldbody.add_body(name="press")
@@ -102,9 +106,11 @@ def scene_spec(part: Part, contactor: ContactorSpec, timestep_s: float) -> mujoc
     return spec
 
 
-def build_press_scene(part: Part, contactor: ContactorSpec, timestep_s: float) -> PressScene:
+def build_press_scene(
+    part: Part, contactor: ContactorSpec, timestep_s: float, solver_iterations: int = 100
+) -> PressScene:
     """Compile the press scene of ``contactor`` on ``part`` and index its named elements."""
-    model = scene_spec(part, contactor, timestep_s).compile()
+    model = scene_spec(part, contactor, timestep_s, solver_iterations).compile()
     names = sorted(contactor.geom_labels)
     readout = TaxelReadout(
         model, f"{PART_PREFIX}tactile", f"{PART_PREFIX}skin", [PREFIX + n for n in names]

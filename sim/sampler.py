@@ -20,6 +20,7 @@ from sim.contactors import ContactorSpec, PressPlan
 from sim.episode import EpisodeContext, Maker, run_sample
 from sim.gen_config import GenerateConfig, is_mesh_path
 from sim.generate_hands import hand_maker
+from sim.hand import HandConfig
 from sim.nonhand import sample_nonhand
 from sim.parts import Part, get_part
 from sim.subjects import Subject, sample_subjects
@@ -59,7 +60,10 @@ def build_part(cfg: GenerateConfig) -> Part:
 def subject_pool(cfg: GenerateConfig) -> list[Subject]:
     """The dataset's ``n_subjects`` people (ids s0000..), from the dataset seed only."""
     seq = np.random.SeedSequence(cfg.seed, spawn_key=SUBJECT_SPAWN_KEY)
-    return sample_subjects(cfg.n_subjects, np.random.default_rng(seq))
+    people = sample_subjects(cfg.n_subjects, np.random.default_rng(seq))
+    if cfg.hand_detail == HandConfig.detail:
+        return people
+    return [replace(s, hand=replace(s.hand, detail=cfg.hand_detail)) for s in people]
 
 
 def scaled(make: Maker, factor: float) -> Maker:

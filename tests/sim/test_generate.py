@@ -137,6 +137,8 @@ def test_folder_of_another_configuration_is_refused_untouched(reference: Path) -
         ({"hand_fraction": 1.5}, r"hand_fraction = 1.5 is out of range; allowed \[0, 1\]"),
         ({"part": "foream"}, r"unknown part 'foream'; known parts: forearm.*link mesh file"),
         ({"chunk_size": 0}, r"chunk_size = 0 is out of range"),
+        ({"episode": {"solver_iterations": 0}}, r"episode.solver_iterations = 0 is out of range"),
+        ({"hand_detail": "fine"}, r"hand_detail = 'fine' unknown; choose one of full, coarse"),
     ],
 )
 def test_bad_values_fail_naming_field_and_range(changes: dict, message: str) -> None:

@@ -170,6 +170,21 @@ def test_every_collision_geom_has_a_part_tag(side):
     assert (ids > 0).sum() == len(parts)
 
 
+def test_coarse_palm_drops_the_rounding_capsules_and_keeps_every_part():
+    """Coarse detail: per palm half, the two metacarpal capsules and the heel capsule go (6 geoms)
+    and nothing else changes — the same parts, joints, actuators and finger geoms."""
+    full, coarse = (build_hand_spec(HandConfig(detail=d)) for d in ("full", "coarse"))
+    pf, pc = geom_parts(full), geom_parts(coarse)
+    gone = sorted(set(pf) - set(pc))
+    assert set(pc) <= set(pf) and len(gone) == 6
+    assert all(pf[g] == "palm" and ("metacarpal" in g or "heel" in g) for g in gone)
+    assert set(pc.values()) == set(HAND_PARTS)
+    assert [j.name for j in full.joints] == [j.name for j in coarse.joints]
+    assert len(full.actuators) == len(coarse.actuators)
+    with pytest.raises(ConfigError, match="detail='fine' unknown"):
+        HandConfig(detail="fine")
+
+
 # --- thumb opposition and palm arch ------------------------------------------------------------
 
 
@@ -211,10 +226,12 @@ def test_palm_arches():
 # --- dynamics ----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("side", SIDES)
-@pytest.mark.parametrize("length_m", [0.15, 0.22])
-def test_steps_one_second_under_random_controls_without_warnings(side, length_m):
-    model, data = scene(HandConfig(length_m=length_m, side=side), floor=True, z_m=0.06)
+@pytest.mark.parametrize(("side", "length_m", "detail"),
+                         [("right", 0.15, "full"), ("right", 0.22, "full"), ("left", 0.15, "full"),
+                          ("left", 0.22, "full"), ("right", 0.18, "coarse")])  # fmt: skip
+def test_steps_one_second_under_random_controls_without_warnings(side, length_m, detail):
+    cfg = HandConfig(length_m=length_m, side=side, detail=detail)
+    model, data = scene(cfg, floor=True, z_m=0.06)
     rng = np.random.default_rng(7)
     lo, hi = model.actuator_ctrlrange.T
     for step in range(round(1.0 / model.opt.timestep)):
