@@ -1,13 +1,16 @@
-"""Classification accuracy by contact size: where a hand / non-hand classifier fails.
+"""Classification accuracy by contact size and by contactor: where a hand / non-hand
+classifier fails.
 
 A touch that presses a handful of taxels carries little shape; the paper reports one accuracy
 over all images. ``handskin evaluate`` adds, for a handskin dataset, the accuracy of each true
 class within bins of the number of active taxels (pressure above the dataset's active
-threshold), so a user sees which contacts cost the accuracy.
+threshold), and the accuracy on each kind of contactor (``kind: type`` from the dataset's
+``contactor`` JSON, e.g. ``object: rake``), so a user sees which contacts cost the accuracy.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from itertools import pairwise
 from pathlib import Path
@@ -73,4 +76,51 @@ def breakdown_markdown(rows: list[dict]) -> list[str]:
             c = r["per_class"][n]
             cells += [str(c["n"]), "–" if c["accuracy"] is None else f"{100 * c['accuracy']:.1f}"]
         lines.append(f"| {span} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def accuracy_by_group(pred: np.ndarray, truth: np.ndarray,
+                      groups: Sequence[str]) -> list[dict[str, object]]:  # fmt: skip
+    """Samples, errors and accuracy (fraction) of every group, least accurate first (ties by name).
+
+    pred, truth : (S,) int class ids; groups : (S,) str group of each sample.
+    """
+    pred, truth, groups = np.asarray(pred).ravel(), np.asarray(truth).ravel(), np.asarray(groups)
+    if not len(pred) == len(truth) == len(groups):
+        raise ValueError(f"pred, truth and groups differ in length: "
+                         f"{len(pred)}, {len(truth)}, {len(groups)}")  # fmt: skip
+    rows = []
+    for g in np.unique(groups):
+        m = groups == g
+        ok = int(np.sum(pred[m] == truth[m]))
+        rows.append({"group": str(g), "n": int(m.sum()), "errors": int(m.sum()) - ok,
+                     "accuracy": ok / int(m.sum())})  # fmt: skip
+    return sorted(rows, key=lambda r: (r["accuracy"], r["group"]))
+
+
+def contactor_types(data_path: str | Path, indices: np.ndarray) -> list[str]:
+    """``"<kind>: <type>"`` of samples ``indices`` (S,) from the dataset's ``contactor`` JSON
+    (``"unknown"`` where the field or its keys are missing, e.g. ingested recordings)."""
+    from tactile.dataset.reader import DatasetReader
+
+    with DatasetReader(data_path) as reader:
+        if "contactor" not in reader.fields:
+            return ["unknown"] * len(indices)
+        order = np.argsort(indices)
+        raw = reader["contactor"][np.asarray(indices)[order]]
+    out = [""] * len(indices)
+    for pos, text in zip(order, raw, strict=True):
+        try:
+            c = json.loads(text.decode() if isinstance(text, bytes) else text)
+            out[pos] = f"{c['kind']}: {c.get('type', c.get('name'))}"
+        except (ValueError, KeyError, TypeError):
+            out[pos] = "unknown"
+    return out
+
+
+def group_markdown(rows: list[dict]) -> list[str]:
+    """A markdown table of :func:`accuracy_by_group` (accuracy in %)."""
+    lines = ["| contactor | samples | errors | accuracy % |", "|---|---|---|---|"]
+    lines += [f"| {r['group']} | {r['n']} | {r['errors']} | {100 * r['accuracy']:.1f} |"
+              for r in rows]  # fmt: skip
     return lines

@@ -208,7 +208,12 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     """Test-split metrics (float and fast path) and CPU ms/image (1 thread by default) of a
     checkpoint (a .pt file; a classical model.npz goes to ``learn.classical.evaluate_classical``);
     a JSON-able dict (one row of the report)."""
-    from learn.breakdown import accuracy_by_active_taxels, active_taxel_counts
+    from learn.breakdown import (
+        accuracy_by_active_taxels,
+        accuracy_by_group,
+        active_taxel_counts,
+        contactor_types,
+    )
     from learn.checkpoint import load_checkpoint, model_from_checkpoint
     from learn.folder import is_dataset, materialize, open_split
 
@@ -225,12 +230,14 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     test = materialize(split, "test")
     n_cls = run.model.num_classes
     ref = evaluate_tensors(model, test, n_cls)
-    by_size = None
-    if run.task == "classify" and is_dataset(data_path):  # accuracy by contact size
+    by_size = by_contactor = None
+    if run.task == "classify" and is_dataset(data_path):  # by contact size and by contactor
         pred = logits_of(model, test.x).argmax(1).numpy()
         names = list(ckpt.get("class_names") or [str(c) for c in range(n_cls)])
         by_size = accuracy_by_active_taxels(pred, test.y.numpy(),
                                             active_taxel_counts(data_path, split.indices), names)
+        by_contactor = accuracy_by_group(pred, test.y.numpy(),
+                                         contactor_types(data_path, split.indices))
     fast = fast_inference(model, check=test.x[:64])
     res = evaluate_tensors(fast, test, n_cls)
     if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
@@ -247,7 +254,8 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
             "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
             "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
             "config": ckpt["config"], "input_size": list(size),
-            "train_versions": ckpt.get("versions"), "by_active_taxels": by_size}  # fmt: skip
+            "train_versions": ckpt.get("versions"), "by_active_taxels": by_size,
+            "by_contactor": by_contactor}  # fmt: skip
 
 
 def _fmt(v: float | None, scale: float = 1.0) -> str:
@@ -330,12 +338,16 @@ def _merged(r: dict) -> list[str]:
 
 def _by_size(r: dict) -> list[str]:
     """The accuracy-by-contact-size table of a classifier row on a handskin dataset."""
-    from learn.breakdown import breakdown_markdown
+    from learn.breakdown import breakdown_markdown, group_markdown
 
     if not r.get("by_active_taxels"):
         return []
-    return ["Accuracy by contact size (active taxels: pressure above the dataset's active "
-            "threshold):", "", *breakdown_markdown(r["by_active_taxels"]), ""]
+    out = ["Accuracy by contact size (active taxels: pressure above the dataset's active "
+           "threshold):", "", *breakdown_markdown(r["by_active_taxels"]), ""]
+    if r.get("by_contactor"):
+        out += ["Accuracy by contactor (the dataset's `contactor` kind and type), least accurate "
+                "first:", "", *group_markdown(r["by_contactor"]), ""]
+    return out
 
 
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:

@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from learn.breakdown import accuracy_by_active_taxels, breakdown_markdown
+from learn.breakdown import (
+    accuracy_by_active_taxels,
+    accuracy_by_group,
+    breakdown_markdown,
+    group_markdown,
+)
 
 
 def test_bins_and_per_class_accuracy_by_hand():
@@ -30,3 +35,17 @@ def test_bins_and_per_class_accuracy_by_hand():
 def test_lengths_must_agree():
     with pytest.raises(ValueError, match="length"):
         accuracy_by_active_taxels(np.zeros(3), np.zeros(2), np.zeros(3), ["a", "b"])
+
+
+def test_accuracy_by_contactor_by_hand_least_accurate_first():
+    groups = ["object: rake", "hand: right_hand", "object: rake", "body: elbow", "hand: right_hand",
+              "object: rake"]  # fmt: skip
+    truth = np.array([0, 1, 0, 0, 1, 0])
+    pred = np.array([1, 1, 0, 0, 0, 1])
+    rows = accuracy_by_group(pred, truth, groups)
+    assert [(r["group"], r["n"], r["errors"]) for r in rows] == [
+        ("object: rake", 3, 2), ("hand: right_hand", 2, 1), ("body: elbow", 1, 0)]
+    assert rows[0]["accuracy"] == pytest.approx(1 / 3) and rows[1]["accuracy"] == 0.5
+    assert "| object: rake | 3 | 2 | 33.3 |" in "\n".join(group_markdown(rows))
+    with pytest.raises(ValueError, match="length"):
+        accuracy_by_group(pred, truth, groups[:2])

@@ -107,7 +107,12 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
         right = sum(b["per_class"][name]["n"] * (b["per_class"][name]["accuracy"] or 0)
                     for b in per_bin)  # fmt: skip
         assert n == sum(clf["cm"][c]) and round(right) == clf["cm"][c][c]
-    assert seg["by_active_taxels"] is None
+    # so does the contactor breakdown (this dataset stores no contactor field: one "unknown")
+    groups = clf["by_contactor"]
+    assert [g["group"] for g in groups] == ["unknown"] and groups[0]["n"] == 16
+    cm = np.asarray(clf["cm"])
+    assert groups[0]["errors"] == cm.sum() - np.trace(cm)
+    assert seg["by_active_taxels"] is None and seg["by_contactor"] is None
 
 
 def test_plot_history(tmp_path):

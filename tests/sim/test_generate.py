@@ -72,6 +72,16 @@ def test_images_regenerated_from_raw_readings_equal_the_stored_ones(reference: P
         np.testing.assert_array_equal(faulty[i][0].numpy(), plain[i][0].numpy())
 
 
+def test_contactor_types_name_the_kind_of_every_sample(reference: Path) -> None:
+    from learn.breakdown import contactor_types
+
+    with open_dataset(reference) as ds:
+        is_hand = ds.is_hand[:].astype(bool)
+    types = contactor_types(reference, np.arange(len(is_hand))[::-1])[::-1]  # any order
+    assert [t.startswith("hand: ") for t in types] == is_hand.tolist()
+    assert all(t.split(": ")[0] in ("hand", "object", "body") and t.split(": ")[1] for t in types)
+
+
 def test_dataset_content_classes_subjects_and_split(reference: Path) -> None:
     with open_dataset(reference) as ds:
         is_hand = ds["is_hand"][()]
