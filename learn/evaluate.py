@@ -28,11 +28,13 @@ CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
 
 @dataclass
 class EvalResult:
-    """Confusion matrix ``cm`` (C, C) int64 (rows true), scores (fractions), mean loss."""
+    """Confusion matrix ``cm`` (C, C) int64 (rows true), scores (fractions), mean loss, and the
+    predicted classes ((S,) or (S, h, w) int64) when asked for."""
 
     cm: torch.Tensor
     metrics: dict[str, float]
     loss: float
+    predictions: torch.Tensor | None = None
 
     @property
     def percent(self) -> torch.Tensor:
@@ -54,24 +56,28 @@ def scores(cm: torch.Tensor) -> dict[str, float]:
 
 
 def evaluate_tensors(
-    model: nn.Module, data, num_classes: int, batch_size: int = 64, loss_fn: nn.Module | None = None
-) -> EvalResult:
+    model: nn.Module, data, num_classes: int, batch_size: int = 64,
+    loss_fn: nn.Module | None = None, keep_predictions: bool = False,
+) -> EvalResult:  # fmt: skip
     """Metrics of ``model`` on ``data`` (``TensorData``: x (S, 1, h, w), y (S,) or (S, h, w)).
 
     The model is left in eval mode. ``loss`` is the mean of ``loss_fn`` over batches (NaN
-    without a loss function).
+    without a loss function); ``keep_predictions`` also returns the predicted classes.
     """
-    cms, losses = [], []
+    cms, losses, preds = [], [], []
     for i in range(0, len(data.y), batch_size):
         x, y = data.x[i : i + batch_size], data.y[i : i + batch_size]
         out = logits_of(model, x, batch_size)
-        cms.append(M.confusion_matrix(y, out.argmax(1), num_classes))
+        pred = out.argmax(1)
+        cms.append(M.confusion_matrix(y, pred, num_classes))
+        if keep_predictions:
+            preds.append(pred)
         if loss_fn is not None:
             with torch.no_grad():
                 losses.append(float(loss_fn(out, y)) * len(y))
     cm = torch.stack(cms).sum(0)
     loss = sum(losses) / len(data.y) if losses else float("nan")
-    return EvalResult(cm, scores(cm), loss)
+    return EvalResult(cm, scores(cm), loss, torch.cat(preds) if preds else None)
 
 
 class FastInference(nn.Module):
@@ -229,10 +235,11 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                        run.train.seed)  # fmt: skip
     test = materialize(split, "test")
     n_cls = run.model.num_classes
-    ref = evaluate_tensors(model, test, n_cls)
+    classify_data = run.task == "classify" and is_dataset(data_path)
+    ref = evaluate_tensors(model, test, n_cls, keep_predictions=classify_data)
     by_size = by_contactor = None
-    if run.task == "classify" and is_dataset(data_path):  # by contact size and by contactor
-        pred = logits_of(model, test.x).argmax(1).numpy()
+    if classify_data:  # accuracy by contact size and by contactor
+        pred = ref.predictions.numpy()
         names = list(ckpt.get("class_names") or [str(c) for c in range(n_cls)])
         by_size = accuracy_by_active_taxels(pred, test.y.numpy(),
                                             active_taxel_counts(data_path, split.indices), names)

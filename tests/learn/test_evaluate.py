@@ -58,6 +58,9 @@ def test_classification_metrics_by_hand():
     assert res.metrics["mean_accuracy"] == pytest.approx((1 / 2 + 2 / 3) / 2)
     assert res.percent.flatten().tolist() == pytest.approx([50.0, 50.0, 100 / 3, 200 / 3])
     assert "| 0 | 50.00 | 50.00 |" in confusion_markdown(res.cm, ("0", "1"))
+    assert res.predictions is None
+    kept = evaluate_tensors(Oracle(False, 2), data, 2, batch_size=2, keep_predictions=True)
+    assert kept.predictions.tolist() == pred.tolist() and kept.cm.tolist() == res.cm.tolist()
 
 
 def test_segmentation_metrics_by_hand():
