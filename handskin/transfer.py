@@ -173,8 +173,9 @@ def transfer_command(
     n_pretrain: _opt(int | None, "Synthetic pretraining samples to generate (count).") = None,
     n_source: _opt(int | None, "Forearm samples to generate (count).") = None,
     workers: _opt(int, "Generation processes (count).") = 1,
-    models: _opt(Path | None, "Folder (path) of the models trained here; default OUT/models; "
-                 "reused by a rerun.") = None,
+    models: _opt(Path | None, "Folder (path) of the models trained here and of every "
+                 "fine-tuning result (finetune/*.json); default OUT/models; a rerun reuses them, "
+                 "so a stopped run resumes.") = None,
     progress: _opt(bool, "Show progress bars.") = True,
 ) -> None:
     """Test C: forearm model on the end-effector, fine-tuning, synthetic pretraining, curve."""

@@ -122,6 +122,37 @@ def test_transfer_report_and_chart(transfer_run):
     assert res["report"] == str(out / "report.md") and (out / "results.json").is_file()
 
 
+def test_a_rerun_reads_every_finetuning_result_back_without_training(transfer_run, monkeypatch):
+    """Stopped runs resume: each fine-tuning result is on disk with its key, so a rerun of the
+    same command trains nothing and reports the same numbers."""
+    import learn.train
+
+    out, res = transfer_run
+    files = sorted((out / "models" / "finetune").glob("classify-*.json"))
+    assert len(files) == 3 * 3  # 3 starts x (4, 8, all); forearm/all is the Test C run itself
+
+    def no_training(*args, **kwargs):
+        raise AssertionError("a rerun must not train")
+
+    monkeypatch.setattr(learn.train, "fit", no_training)
+    again = T.run_transfer_experiment(out, s=SETTINGS, plan=PLAN, progress=False)
+    assert again["classify"]["curve"] == res["classify"]["curve"]
+    assert again["classify"]["finetuned"] == res["classify"]["finetuned"]
+
+
+def test_a_cached_result_is_recomputed_when_its_key_differs(tmp_path):
+    from learn.experiments.transfer_cache import cached
+
+    calls = []
+    path = tmp_path / "r.json"
+    assert cached(path, {"a": 1}, lambda: calls.append(1) or {"x": 1.5}) == {"x": 1.5}
+    assert cached(path, {"a": 1}, lambda: calls.append(2) or {"x": 9.0}) == {"x": 1.5}
+    assert cached(path, {"a": 2}, lambda: calls.append(3) or {"x": 2.5}) == {"x": 2.5}
+    assert calls == [1, 3]
+    path.write_text("{not json")  # a torn file is recomputed, not an error
+    assert cached(path, {"a": 2}, lambda: {"x": 4.0}) == {"x": 4.0}
+
+
 def test_datasets_are_reused_and_a_default_folder_of_another_size_refused(transfer_run):
     out, _ = transfer_run
     folder = out / "data" / "end_effector"

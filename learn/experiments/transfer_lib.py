@@ -12,6 +12,9 @@ For each task (classification, and segmentation when asked or a segmenter is giv
 4. the learning curve: fine-tuning on N = ``curve_sizes`` and all end-effector train samples
    (nested, class-balanced prefixes of the train split, so subject- and instance-disjoint from
    test) from scratch, from the forearm model and from the synthetic end-effector model.
+
+Every fine-tuning result is kept under ``<models>/finetune/`` with its key
+(`learn.experiments.transfer_cache`), so a stopped run resumes at the next one.
 """
 
 from __future__ import annotations
@@ -193,17 +196,27 @@ def target_data(target: Path, run, progress: bool):
 
 
 def finetune(run, data, rows: np.ndarray, index: np.ndarray, init: Path | None,
-             progress: bool) -> dict:  # fmt: skip
+             progress: bool, cache: tuple[Path, Path] | None = None) -> dict:  # fmt: skip
     """Fine-tune on the train rows ``rows`` and score on data.test; ``samples``: the dataset
-    indices trained on (``index[rows]``, sorted)."""
+    indices trained on (``index[rows]``, sorted). ``cache`` = (result file, target dataset):
+    the result is read from the file when it was computed for the same run, start, target and
+    samples, else computed and written there (`learn.experiments.transfer_cache`)."""
+    from learn.experiments.transfer_cache import cached, finetune_key
     from learn.folder import Data, TensorData
     from learn.train import fit
 
-    sub = Data(TensorData(data.train.x[rows], data.train.y[rows]), None, data.test,
-               data.class_names, data.description)  # fmt: skip
-    result = fit(run, sub, None, init_from=init, progress=progress)
-    return score(result.model, data.test, run.model.num_classes) | {
-        "n": len(rows), "samples": np.sort(index[rows]).tolist()}
+    samples = np.sort(index[rows]).tolist()
+
+    def compute() -> dict:
+        sub = Data(TensorData(data.train.x[rows], data.train.y[rows]), None, data.test,
+                   data.class_names, data.description)  # fmt: skip
+        result = fit(run, sub, None, init_from=init, progress=progress)
+        return score(result.model, data.test, run.model.num_classes) | {
+            "n": len(rows), "samples": samples}
+
+    if cache is None:
+        return compute()
+    return cached(cache[0], finetune_key(run, init, cache[1], samples), compute)
 
 
 def transfer_task(task: str, source: Path, target: Path, pretrain: Path, models_dir: Path,
@@ -228,7 +241,11 @@ def transfer_task(task: str, source: Path, target: Path, pretrain: Path, models_
                          "synthetic EE": score(synthetic, data.test, n_cls)}}  # fmt: skip
     sizes = sorted({n for n in s.curve_sizes if n < len(hand)} | {len(hand)})
     inits = {"scratch": None, "forearm": forearm, "synthetic EE": synthetic}
-    out["finetuned"] = finetune(run, data, order, index, forearm, progress)
+    def cache(name: str, n: int) -> tuple[Path, Path]:
+        return models_dir / "finetune" / f"{task}-{name.replace(' ', '_')}-{n}.json", target
+
+    out["finetuned"] = finetune(run, data, order, index, forearm, progress,
+                                cache("forearm", len(hand)))  # fmt: skip
     out["curve"] = {name: [] for name in INITS}
     for name in INITS:
         for n in sizes:
@@ -236,5 +253,6 @@ def transfer_task(task: str, source: Path, target: Path, pretrain: Path, models_
                 out["curve"][name].append(out["finetuned"])
                 continue
             ft = finetune_run(model, s, scratch=name == "scratch")
-            out["curve"][name].append(finetune(ft, data, order[:n], index, inits[name], progress))
+            out["curve"][name].append(finetune(ft, data, order[:n], index, inits[name], progress,
+                                               cache(name, n)))  # fmt: skip
     return out
