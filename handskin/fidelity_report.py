@@ -216,10 +216,11 @@ def write_report(report: Report, rows: list[dict], plan: FidelityPlan, rich: Gen
 
 
 NOT_SWEPT = (
-    "The issue also names solver iterations, hand detail and taxel count. `GenerateConfig` has "
-    "no field for the first two, and the taxel count is fixed by the part (`forearm` and "
-    "`forearm_8mm` both carry 768 taxels), so they are not swept here; docs/fidelity.md gives "
-    "the reasons and the fields that would add them. `--part` repeats the sweep on another part."
+    "The issue also names the taxel count. It is fixed by the part (`forearm` and `forearm_8mm` "
+    "both carry 768 taxels): another layout is another sensor with another map, not a cheaper "
+    "simulation of the same one, so it is not swept here (docs/fidelity.md). `--part` repeats "
+    "the sweep on another part. Solver iterations (`solver_1`) and hand detail (`coarse_hand`) "
+    "are swept when the settings include them."
 )
 
 
