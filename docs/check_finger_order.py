@@ -52,8 +52,7 @@ def main() -> None:
           f"(thumb in the print: {rb[th].mean():.1%} of {th.sum()}; "
           f"without: {rb[~th].mean():.1%} of {(~th).sum()})")
     for name, cm in (("as labelled", plain), ("best of both orders per image", best)):
-        c = cm.double()
-        iou = torch.diag(c) / (c.sum(0) + c.sum(1) - torch.diag(c))
+        iou = M.class_ious(cm)
         print(f"{name}: mIoU {100 * M.mean_iou(cm):.2f} %; IoU per class (%) "
               f"{np.round(100 * iou.numpy(), 1).tolist()}")
 

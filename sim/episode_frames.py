@@ -21,7 +21,6 @@ from sim.skin import SkinInstance, depth_to_pressure
 from tactile.labels import label_image
 from tactile.tactile_map import TactileMap
 
-NOISE_SIGMAS = 3.0  # readings less than this many noise sd above the baseline are read as 0
 # A contact is felt when its point lies within this many taxel spacings (`SkinInstance.spacing_m`,
 # the pad pitch) of a pressed taxel: about one, plus the half pitch by which a flat face's rim
 # contacts can lie beyond the last pressed taxel (a 25 mm punch on the plate: 1.0 pitch).
@@ -128,11 +127,9 @@ def read_frame(scene: PressScene, skin: SkinInstance, active_pa: float, time_s: 
 
 
 def sensed_pressure(skin: SkinInstance, reading: np.ndarray, time_s: float) -> np.ndarray:
-    """Pressure (N,) Pa as the robot reads it: reading minus the known baseline and drift,
-    below `NOISE_SIGMAS` noise sd set to 0, over the nominal gain (gains unknown to it)."""
-    signal = reading.astype(np.float64) - skin.offset(time_s)
-    floor = NOISE_SIGMAS * skin.cfg.noise_std_counts
-    return np.where(signal > floor, signal, 0.0) / skin.cfg.counts_per_pa
+    """Pressure (N,) Pa as the robot reads it (`SkinInstance.readout`: the known baseline and
+    drift removed, 3 noise sd floor, nominal gain) — what a dataset's readers reproduce."""
+    return skin.readout().pressure_pa(reading, time_s)
 
 
 def label_taxels(

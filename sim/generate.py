@@ -148,15 +148,9 @@ class RunReport:
 def open_writer(cfg: GenerateConfig, out: Path, ctx):
     """The dataset writer of ``cfg`` in ``out`` (refuses a folder of another configuration)."""
     from sim.contactors import ACTIONS
-    from sim.episode_frames import NOISE_SIGMAS
     from tactile.dataset import DatasetWriter
 
-    skin = ctx.skin
-    attrs = {"skin_counts_per_pa": cfg.episode.skin.counts_per_pa,
-             "skin_baseline_counts": np.asarray(skin.baseline_counts, np.float64),
-             "skin_drift_counts_per_s": np.asarray(skin.drift_counts_per_s, np.float64),
-             "skin_noise_floor_counts": NOISE_SIGMAS * float(cfg.episode.skin.noise_std_counts),
-             "actions": list(ACTIONS)}  # fmt: skip
+    attrs = ctx.skin.readout().attrs() | {"actions": list(ACTIONS)}
     return DatasetWriter(
         out, config=cfg, part=cfg.part_id(), generator_version=generator_version(),
         seed=cfg.seed, tmap=ctx.tmap, layout=ctx.part.layout, attrs=attrs,

@@ -26,6 +26,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
+from tactile.dataset.readout import NOISE_FLOOR_SIGMAS, Readout
 from tactile.errors import ConfigError
 from tactile.faults import dead_modules
 
@@ -227,6 +228,12 @@ class SkinInstance:
         if force_n is not None and self.cfg.force_consistent:
             base = force_consistent_pressure(base, self.area_m2, force_n)
         return self.spread @ base
+
+    def readout(self) -> Readout:
+        """How the robot reads this skin: known baseline and drift removed, signals at or below
+        `NOISE_FLOOR_SIGMAS` noise sd read 0, over the nominal gain (gains unknown to it)."""
+        return Readout(self.cfg.counts_per_pa, self.baseline_counts, self.drift_counts_per_s,
+                       NOISE_FLOOR_SIGMAS * self.cfg.noise_std_counts)  # fmt: skip
 
     def offset(self, time_s: float) -> np.ndarray:
         """Untouched reading (N,) counts at time_s: baseline plus linear drift."""

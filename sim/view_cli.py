@@ -65,8 +65,11 @@ def from_dataset(path: Path, index: int):
         sample, tmap, config = ds[index], ds.map, ds.attrs.get("config")
         seq = None
         if "seq_raw" in ds.fields:
+            from sim.episode import FRAME_DT_S
+
             raw = sample["seq_raw"][: int(sample["seq_length"])]
-            seq = common_scale_images(tmap, ds.pressure_from_raw(raw))
+            times_s = (np.arange(len(raw)) + 1) * FRAME_DT_S  # frame k at (k + 1) / 10 Hz
+            seq = common_scale_images(tmap, ds.pressure_from_raw(raw, times_s))
     if not isinstance(config, dict):
         return None, tmap, sample, seq
     from sim.gen_config import GenerateConfig

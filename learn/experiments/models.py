@@ -60,18 +60,21 @@ def ensure_model(
     if run.model.arch != arch:
         run = dataclasses.replace(run, model=dataclasses.replace(run.model, arch=arch))
     if (out / "best.pt").is_file():
-        _check_reusable(out / "best.pt", run)
+        check_reusable(out / "best.pt", run)
         print(f"reusing {out / 'best.pt'}")
         return out / "best.pt"
     fit(run, load_data(data, run, progress=progress), out, progress=progress)
     return out / "best.pt"
 
 
-def _check_reusable(path: Path, run) -> None:
-    """Raise unless the checkpoint at ``path`` was trained with ``run``'s configuration."""
+def check_reusable(path: Path, run) -> None:
+    """ConfigError unless the checkpoint at ``path`` (when there is one) was trained with
+    ``run``'s configuration."""
     from learn.checkpoint import load_checkpoint
     from learn.train import run_from_dict
 
+    if not path.is_file():
+        return
     stored = run_from_dict(load_checkpoint(path)["config"])
     if stored != run:
         raise ConfigError(

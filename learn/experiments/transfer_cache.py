@@ -20,14 +20,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def finetune_key(run, init: Path | None, target: Path, samples: list[int]) -> dict:
     """The JSON-able key of one fine-tuning result (see module doc)."""
     from tactile.config import to_dict
@@ -35,7 +27,12 @@ def finetune_key(run, init: Path | None, target: Path, samples: list[int]) -> di
 
     with DatasetReader(target) as ds:
         dataset = {"fingerprint": ds.attrs.get("fingerprint"), "n": len(ds)}
-    key = {"config": to_dict(run), "init": None if init is None else _sha256(Path(init)),
+    if init is None:
+        start = None
+    else:
+        with open(init, "rb") as f:
+            start = hashlib.file_digest(f, "sha256").hexdigest()
+    key = {"config": to_dict(run), "init": start,
            "target": dataset, "samples": hashlib.sha256(json.dumps(samples).encode()).hexdigest()}
     return json.loads(json.dumps(key))  # as it reads back from the file (tuples as lists)
 

@@ -145,20 +145,10 @@ def pretrain_data(pretrain: Path, target: Path, run, progress: bool):
                 _class_names(train, run.task), desc)  # fmt: skip
 
 
-def check_reusable(path: Path, run) -> None:
-    """ConfigError when a model to reuse at ``path`` was trained with another configuration."""
-    from learn.checkpoint import load_checkpoint
-    from tactile.config import to_dict
-
-    if path.is_file() and load_checkpoint(path)["config"] != to_dict(run):
-        raise ConfigError(f"{path} was trained with another configuration than this run's "
-                          "(e.g. --quick against the full setting). Fix: another --models or "
-                          f"--out, or delete {path.parent}")  # fmt: skip
-
-
 def synthetic_model(pretrain: Path, target: Path, model, models_dir: Path, s: TransferSettings,
                     progress: bool) -> Path:  # fmt: skip
     """Checkpoint of the model trained on the synthetic end-effector set (reused if present)."""
+    from learn.experiments.models import check_reusable
     from learn.train import fit
 
     out, run = models_dir / f"ee-synthetic-{model.arch}", pretrain_run(model, s)
@@ -225,8 +215,6 @@ def transfer_task(task: str, source: Path, target: Path, pretrain: Path, models_
     from learn.experiments.models import ensure_model
 
     model = model_config(task, checkpoint, s)
-    if checkpoint is None:
-        check_reusable(models_dir / f"forearm-{model.arch}" / "best.pt", pretrain_run(model, s))
     forearm = ensure_model(model.arch, source, models_dir, checkpoint=checkpoint,
                            run=pretrain_run(model, s), name=f"forearm-{model.arch}",
                            progress=progress)  # fmt: skip

@@ -3,11 +3,12 @@
     ro = Readout.of(attrs)                       # from a dataset's root attributes
     p = ro.pressure_pa(raw, time_s)              # (B, N) counts, (B,) s -> (B, N) Pa
 
-The generator (`sim.episode_frames.sensed_pressure`) images ``reading - baseline - drift * t``,
-with signals at or below the noise floor (3 noise sd) read as 0, over the nominal gain (the
-per-taxel gain spread is unknown to a robot, so it is not undone). A dataset stores what that
-takes as root attributes; with all of them stored, the images regenerated from ``raw`` and
-``time_s`` equal the stored ones (tests/sim/test_generate.py).
+The generator images what this readout gives (`sim.skin.SkinInstance.readout`, used by
+`sim.episode_frames.sensed_pressure`): ``reading - (baseline + drift * t)``, with signals at or
+below the noise floor (3 noise sd) read as 0, over the nominal gain (the per-taxel gain spread is
+unknown to a robot, so it is not undone). A dataset stores it as root attributes (`attrs`);
+with all of them stored, the images regenerated from ``raw`` and ``time_s`` equal the stored
+ones (tests/sim/test_generate.py).
 
 Attributes (all optional; a missing one is the identity):
 - ``skin_counts_per_pa`` : float, counts/Pa (1.0: pressures in counts);
@@ -72,5 +73,12 @@ class Readout:
         t = np.asarray(0.0 if time_s is None else time_s, dtype=np.float64)
         if raw.ndim == 2 and t.ndim == 1:
             t = t[:, None]
-        signal = raw - self.baseline_counts - self.drift_counts_per_s * t
+        signal = raw - (self.baseline_counts + self.drift_counts_per_s * t)
         return np.where(signal > self.floor_counts, signal, 0.0) / self.gain_counts_per_pa
+
+    def attrs(self) -> dict[str, object]:
+        """The root attributes that describe this readout (the inverse of `of`)."""
+        return {"skin_counts_per_pa": self.gain_counts_per_pa,
+                "skin_baseline_counts": np.asarray(self.baseline_counts, np.float64),
+                "skin_drift_counts_per_s": np.asarray(self.drift_counts_per_s, np.float64),
+                "skin_noise_floor_counts": self.floor_counts}  # fmt: skip

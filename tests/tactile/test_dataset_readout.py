@@ -38,3 +38,11 @@ def test_no_time_removes_no_drift():
 def test_a_non_positive_gain_is_refused_naming_the_fix():
     with pytest.raises(DataError, match="counts-per-pa"):
         Readout.of({"skin_counts_per_pa": 0.0})
+
+
+def test_attrs_describe_the_readout_they_came_from():
+    ro = Readout.of(ATTRS)
+    back = Readout.of(ro.attrs())
+    raw = np.array([[4500, 4399, 4200]])
+    np.testing.assert_array_equal(back.pressure_pa(raw, [1.0]), ro.pressure_pa(raw, [1.0]))
+    assert back.floor_counts == 300.0 and back.gain_counts_per_pa == 0.5
