@@ -2,11 +2,12 @@
 
     ckpt = {"model": state_dict, "optimizer": state_dict, "scheduler": state_dict,
             "config": {...}, "epoch": int, "best_metric": float, "history": [...],
-            "class_names": [...], "versions": {...}, "seed": int}
+            "class_names": [...], "versions": {...}, "seed": int, "inputs": str}
 
 ``config`` is the resolved :class:`learn.train.RunConfig` as a JSON-able dict
 (``tactile.config.to_dict``); ``epoch`` is the number of completed epochs; ``history`` holds one
-dict of losses and metrics per epoch. Files are written atomically (temporary name, then
+dict of losses and metrics per epoch; ``inputs`` names the rule its network inputs were made
+with (`learn.inputs.INPUTS`). Files are written atomically (temporary name, then
 ``os.replace``) so a killed run never leaves half a checkpoint.
 """
 
@@ -22,6 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from learn.inputs import INPUTS
 from tactile.errors import DataError
 
 LAST, BEST = "last.pt", "best.pt"  # file names in a run folder
@@ -73,6 +75,7 @@ def make_checkpoint(
         "epoch": int(epoch),
         "best_metric": float(best_metric),
         "versions": versions(),
+        "inputs": INPUTS,
     }
     if optimizer is not None:
         ckpt["optimizer"] = optimizer.state_dict()
@@ -98,9 +101,22 @@ def model_from_checkpoint(ckpt: Mapping) -> tuple[nn.Module, object]:
     from learn.train import run_from_dict
 
     run = run_from_dict(ckpt["config"])
+    check_inputs(ckpt, run.task)
     model = create_model(run.model.arch, **run.model.kwargs())
     model.load_state_dict(ckpt["model"])
     return model.eval(), run
+
+
+def check_inputs(ckpt: Mapping, task: str, where: str = "the checkpoint") -> None:
+    """DataError for a segmenter trained before its inputs kept their labels' support
+    (`learn.inputs`): it would be scored on inputs it never saw. Classifiers are unaffected."""
+    if task == "segment" and ckpt.get("inputs") != INPUTS:
+        raise DataError(
+            f"{where} is a segmenter trained on inputs blurred past their labels' support "
+            f"(before input rule {INPUTS!r}); its scores would be wrong on today's inputs. "
+            "Fix: retrain it with handskin train (or delete it from the experiment's models "
+            "folder so the experiment retrains it)"
+        )
 
 
 def load_checkpoint(path: str | Path) -> dict[str, object]:

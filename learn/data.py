@@ -18,6 +18,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
+from learn.inputs import net_input
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 from tactile.faults import (
@@ -28,7 +29,7 @@ from tactile.faults import (
     stuck_at,
     zero_taxels,
 )
-from tactile.resize import NET_SIZE, resize_image, resize_labels
+from tactile.resize import NET_SIZE, resize_labels
 from tactile.tactile_map import TactileMap
 
 TASKS = ("classify", "segment")
@@ -173,7 +174,7 @@ class TorchTactileDataset(Dataset):
         image, labels = self.image_and_labels(i)
         x = image.astype(np.float32) / np.float32(255.0)
         if self.size is not None:
-            x = resize_image(x, self.size)
+            x = net_input(x, self.size, self.task)
         x = torch.from_numpy(np.ascontiguousarray(flip(x, view)))[None]
         if self.task == "classify":
             return x, torch.tensor(int(self.reader.is_hand[i]), dtype=torch.int64)

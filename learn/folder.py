@@ -24,12 +24,13 @@ from PIL import Image
 from torch.utils.data import Dataset
 from tqdm.auto import tqdm
 
+from learn.inputs import net_input
 from learn.losses import class_pixel_counts, median_frequency_weights
 from tactile.dataset.reader import DATASET, DatasetReader
 from tactile.dataset.splits import split_indices
 from tactile.errors import DataError
 from tactile.labels import CLASS_NAMES, PALETTE
-from tactile.resize import resize_image, resize_labels
+from tactile.resize import resize_labels
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 HAND_NAMES = ("non_hand", "hand")
@@ -104,7 +105,7 @@ class FolderDataset(Dataset):
     def __getitem__(self, j: int) -> tuple[torch.Tensor, torch.Tensor]:
         base, view = divmod(j, 3) if self.flips else (j, 0)
         i = int(self.indices[base])
-        x = resize_image(read_grey(self.files[i]).astype(np.float32) / 255.0, self.size)
+        x = net_input(read_grey(self.files[i]).astype(np.float32) / 255.0, self.size, self.task)
         x = torch.from_numpy(_flip(x, view).copy())[None]
         if self.task == "classify":
             return x, torch.tensor(int(self.targets[i]), dtype=torch.int64)

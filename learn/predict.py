@@ -27,11 +27,12 @@ from matplotlib.figure import Figure
 from learn.checkpoint import load_checkpoint
 from learn.evaluate import fast_inference
 from learn.folder import is_dataset, read_grey
+from learn.inputs import net_input
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 from tactile.labels import PartSummary, backproject, part_summary
 from tactile.layout import TaxelLayout
-from tactile.resize import resize_image, resize_labels
+from tactile.resize import resize_labels
 from tactile.tactile_map import TactileMap
 
 
@@ -46,7 +47,7 @@ class Predictor:
 
     def logits(self, image: np.ndarray) -> torch.Tensor:
         """Logits of one (H, W) uint8 image (resized to the input): (C,) or (C, h, w)."""
-        x = resize_image(np.asarray(image, np.float32) / 255.0, self.input_size)
+        x = net_input(np.asarray(image, np.float32) / 255.0, self.input_size, self.task)
         with torch.inference_mode():
             return self.model(torch.from_numpy(x)[None, None])[0].float()
 

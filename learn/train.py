@@ -24,7 +24,14 @@ import torch
 from torch import nn
 from tqdm.auto import tqdm
 
-from learn.checkpoint import BEST, LAST, load_checkpoint, make_checkpoint, save_checkpoint
+from learn.checkpoint import (
+    BEST,
+    LAST,
+    check_inputs,
+    load_checkpoint,
+    make_checkpoint,
+    save_checkpoint,
+)
 from learn.config import HANDSNET, ModelConfig, TrainConfig
 from learn.evaluate import evaluate_tensors, plot_history
 from learn.finetune import load_weights, make_optimizer, make_scheduler
@@ -169,6 +176,7 @@ def _restore(out: Path, run: RunConfig, model, optimizer, scheduler):
             f"{out / LAST} was trained with another configuration; resume with the same one "
             "(only train.epochs may change) or use a new --out"
         )
+    check_inputs(ckpt, run.task, str(out / LAST))
     model.load_state_dict(ckpt["model"])
     optimizer.load_state_dict(ckpt["optimizer"])
     scheduler.load_state_dict(ckpt["scheduler"])

@@ -229,7 +229,8 @@ def test_segnet_option_reports_a_mean_iou_that_pixel_counts_reproduce(run, tmp_p
     size = KW["image_px"]
     with open_dataset(results["test_set"]["dataset"]) as ds:
         test = ds.splits["test"]
-        x = np.stack([resize_image(ds.image[i].astype(np.float32) / 255, size) for i in test])
+        x = np.stack([resize_image(ds.image[i].astype(np.float32) / 255, size, keep_support=True)
+                      for i in test])  # segmentation inputs (learn.inputs)
         truth = np.stack([resize_labels(ds.label_image[i], size) for i in test])
     with torch.no_grad():
         pred = model(torch.from_numpy(x)[:, None]).argmax(1).numpy()

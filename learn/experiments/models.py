@@ -70,12 +70,14 @@ def ensure_model(
 def check_reusable(path: Path, run) -> None:
     """ConfigError unless the checkpoint at ``path`` (when there is one) was trained with
     ``run``'s configuration."""
-    from learn.checkpoint import load_checkpoint
+    from learn.checkpoint import check_inputs, load_checkpoint
     from learn.train import run_from_dict
 
     if not path.is_file():
         return
-    stored = run_from_dict(load_checkpoint(path)["config"])
+    ckpt = load_checkpoint(path)
+    stored = run_from_dict(ckpt["config"])
+    check_inputs(ckpt, stored.task, str(path))
     if stored != run:
         raise ConfigError(
             f"{path} was trained with another configuration than this experiment asks for "

@@ -3,7 +3,7 @@ dataset's images were made from, a split held in memory, and network inputs made
 
     test = load_frames("data/forearm", "test", n_classify=None, n_segment=200, seed=0)
     images = test.tmap.image(test.pressure_pa[:64])   # (64, H, W) uint8, the stored pipeline
-    x = net_inputs(images, (68, 100))                 # (64, 1, 68, 100) float32 in [0, 1]
+    x = net_inputs(images, (68, 100), "classify")     # (64, 1, 68, 100) float32 in [0, 1]
 
 Pressures come from ``DatasetReader.pressure_from_raw`` with the frames' ``time_s``: the
 generator's own readout (baseline, drift, 3-sigma noise floor, nominal gain), so frames at zero
@@ -17,11 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
+from learn.inputs import net_input
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 from tactile.labels import label_image
 from tactile.layout import TaxelLayout
-from tactile.resize import resize_image, resize_labels
+from tactile.resize import resize_labels
 from tactile.tactile_map import TactileMap
 
 #: First spawn-key element of each random stream derived from the one --seed (kept disjoint).
@@ -141,11 +142,11 @@ def images(tmap: TactileMap, p: np.ndarray) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros((0, *tmap.shape), np.uint8)
 
 
-def net_inputs(images_u8: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Network inputs (B, 1, h, w) float32 in [0, 1] from images (B, H, W) uint8, made as
-    ``learn.data.TorchTactileDataset`` makes them (scale to [0, 1], then anti-aliased resize)."""
+def net_inputs(images_u8: np.ndarray, size: tuple[int, int], task: str) -> np.ndarray:
+    """Network inputs (B, 1, h, w) float32 in [0, 1] of ``task``'s networks from images
+    (B, H, W) uint8, made as ``learn.data.TorchTactileDataset`` makes them (`learn.inputs`)."""
     x = images_u8.astype(np.float32) / np.float32(255.0)
-    return resize_image(x, tuple(size))[:, None] if len(x) else x[:, None, :0, :0]
+    return net_input(x, tuple(size), task)[:, None] if len(x) else x[:, None, :0, :0]
 
 
 def net_labels(labels: np.ndarray, size: tuple[int, int]) -> np.ndarray:

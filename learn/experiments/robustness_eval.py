@@ -88,7 +88,7 @@ def fast_path_agreement(frames: Frames, models: Sequence[Predictor], n: int = 25
     out = {}
     for m in models:
         rows = (frames.classify if m.task == "classify" else frames.segment)[:n]
-        x = net_inputs(frames.tmap.image(frames.pressure_pa[rows]), m.size)
+        x = net_inputs(frames.tmap.image(frames.pressure_pa[rows]), m.size, m.task)
         out[m.name] = float((m.predict(x) == m.predict(x, eval_mode=True)).mean())
     return out
 
@@ -104,12 +104,13 @@ class Outputs:
 
 
 def _predict_all(images: np.ndarray, models: Sequence[Predictor]) -> dict[str, np.ndarray]:
-    """Every model's predictions for images (B, H, W) uint8; inputs resized once per size."""
+    """Every model's predictions for images (B, H, W) uint8; inputs made once per size and task."""
     out, inputs = {}, {}
     for m in models:
-        if m.size not in inputs:
-            inputs[m.size] = net_inputs(images, m.size)
-        out[m.name] = m.predict(inputs[m.size])
+        key = (m.size, m.task)
+        if key not in inputs:
+            inputs[key] = net_inputs(images, m.size, m.task)
+        out[m.name] = m.predict(inputs[key])
     return out
 
 

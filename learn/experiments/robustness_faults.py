@@ -126,7 +126,7 @@ def faulty_copies(
             labels = rows["taxel_label"][i] if segment else None
             image, truth = faulty_copy(rows["pressure"][i], labels, tmap, layout.module_ids,
                                        pool, mix, rng)  # fmt: skip
-            xs.append(net_inputs(image[None], size))
+            xs.append(net_inputs(image[None], size, task))
             ys.append(net_labels(truth[None], size) if segment else hand[i : i + 1])
     if not xs:
         return np.zeros((0, 1, *size), np.float32), np.zeros((0,), np.int64)

@@ -8,7 +8,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from learn.data import FaultSpec, TorchTactileDataset
-from tactile import TactileMap, TaxelLayout, resize_image
+from tactile import TactileMap, TaxelLayout, resize_image, resize_labels
 from tactile.dataset import DatasetWriter, open_dataset
 from tactile.errors import ConfigError, DataError
 from tactile.faults import (
@@ -101,6 +101,23 @@ def test_segment_targets_and_true_flips(path):
     x6, x8 = resized[6][0].numpy(), resized[8][0].numpy()  # sample 2: original, vertical flip
     np.testing.assert_allclose(x6[:, :, ::-1], x.numpy(), atol=1e-6)
     np.testing.assert_allclose(x6[:, ::-1, :], x8, atol=1e-6)
+
+
+def test_segment_inputs_are_zero_exactly_where_labels_cannot_be(path):
+    """Segmentation inputs keep the nearest-neighbour support of the image, so every labelled
+    pixel is seen pressed and no pixel outside the image's support is; classification inputs
+    keep the anti-aliased blur (checked against tactile's resize)."""
+    seg = TorchTactileDataset(path, split=None, task="segment", flips=False, hand_only=False)
+    clf = TorchTactileDataset(path, split=None, task="classify", flips=False)
+    reader = open_dataset(path)
+    for k in (1, 3):
+        x, y = seg[k]
+        support = resize_labels(reader.image[k] > 0, (68, 100))
+        np.testing.assert_array_equal(x[0].numpy() > 0, support)
+        assert np.all(x[0].numpy()[y.numpy() > 0] > 0)
+        blur = resize_image(reader.image[k].astype(np.float32) / 255, (68, 100))
+        np.testing.assert_allclose(clf[k][0][0].numpy(), blur, atol=1e-6)
+        assert (blur > 0).sum() > (x[0].numpy() > 0).sum()
 
 
 def clean_pressure(path, i: int) -> np.ndarray:

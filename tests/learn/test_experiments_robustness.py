@@ -177,12 +177,12 @@ def slow_blind_spot_cms(frames, predictors, blind, blind_px):
     p = zero_taxels(frames.pressure_pa, blind)
     imgs = images(frames.tmap, p)
     clf, seg = predictors
-    pred_c = clf.predict(net_inputs(imgs[frames.classify], clf.size))
+    pred_c = clf.predict(net_inputs(imgs[frames.classify], clf.size, "classify"))
     cm_c = M.confusion_matrix(frames.is_hand[frames.classify], pred_c, 2)
     truth = np.stack([label_image(frames.tmap, p[r], frames.taxel_label[r])
                       for r in frames.segment])  # fmt: skip
     truth[:, blind_px] = 0
-    pred_s = seg.predict(net_inputs(imgs[frames.segment], seg.size))
+    pred_s = seg.predict(net_inputs(imgs[frames.segment], seg.size, "segment"))
     cm_s = M.confusion_matrix(resize_labels(truth, seg.size), pred_s, 7)
     return {"HandsNet": cm_c.tolist(), "SegNet": cm_s.tolist()}
 

@@ -192,3 +192,29 @@ def test_resize_image_keeps_dtype_and_batches(forearm: TactileMap) -> None:
     batch = resize_image(np.stack([img, img[::-1]]).astype(np.float32), (34, 50))
     assert batch.shape == (2, 34, 50) and batch.dtype == np.float32
     np.testing.assert_array_equal(batch[0], resize_image(img.astype(np.float32), (34, 50)))
+
+
+def test_resize_keep_support_matches_nearest_labels(forearm: TactileMap) -> None:
+    """keep_support: non-zero exactly on the nearest-neighbour support, checked pixel by pixel
+    against the centre-rule nearest source pixel, values the plain resize's where those are at
+    least the smallest positive input; frames of a batch independent of each other."""
+    img = forearm.image(blobs(forearm, [(0.0, 0.0), (60.0, -40.0)], 20.0))
+    h, w = 68, 100
+    plain = resize_image(img, (h, w))
+    kept = resize_image(img, (h, w), keep_support=True)
+    assert kept.dtype == np.uint8
+    H, W = img.shape
+    for i in range(h):
+        for j in range(w):
+            src = img[min(int((i + 0.5) * H / h), H - 1), min(int((j + 0.5) * W / w), W - 1)]
+            if src == 0:
+                assert kept[i, j] == 0
+            else:
+                assert kept[i, j] == max(plain[i, j], img[img > 0].min())
+    x = img.astype(np.float32) / 255
+    assert (resize_image(x, (h, w)) > 0).sum() > 1.2 * (kept > 0).sum()  # blur widens a float
+    batch = resize_image(np.stack([x, np.zeros_like(x), x[::-1] * 0.5]), (h, w), keep_support=True)
+    np.testing.assert_array_equal(batch[0], resize_image(x, (h, w), keep_support=True))
+    np.testing.assert_array_equal(batch[0] > 0, kept > 0)
+    np.testing.assert_array_equal(batch[1], 0)
+    np.testing.assert_array_equal(batch[2], resize_image(x[::-1] * 0.5, (h, w), keep_support=True))
