@@ -107,10 +107,15 @@ def model_from_checkpoint(ckpt: Mapping) -> tuple[nn.Module, object]:
     return model.eval(), run
 
 
-def check_inputs(ckpt: Mapping, task: str, where: str = "the checkpoint") -> None:
-    """DataError for a segmenter trained before its inputs kept their labels' support
+def inputs_stale(ckpt: Mapping, task: str) -> bool:
+    """True for a segmenter trained before its inputs kept their labels' support
     (`learn.inputs`): it would be scored on inputs it never saw. Classifiers are unaffected."""
-    if task == "segment" and ckpt.get("inputs") != INPUTS:
+    return task == "segment" and ckpt.get("inputs") != INPUTS
+
+
+def check_inputs(ckpt: Mapping, task: str, where: str = "the checkpoint") -> None:
+    """DataError naming the fix when `inputs_stale`."""
+    if inputs_stale(ckpt, task):
         raise DataError(
             f"{where} is a segmenter trained on inputs blurred past their labels' support "
             f"(before input rule {INPUTS!r}); its scores would be wrong on today's inputs. "

@@ -109,13 +109,17 @@ class Runner:
                        f"{info['epochs']:.2f} epochs{start}")  # fmt: skip
 
     def _reuse(self, path: Path, run, budget: dict):
-        from learn.checkpoint import load_checkpoint, model_from_checkpoint
+        from learn.checkpoint import inputs_stale, load_checkpoint, model_from_checkpoint
         from tactile.config import to_dict
 
         if not path.is_file():
             return None
         ckpt = load_checkpoint(path)
         if ckpt.get("budget") != budget or ckpt["config"] != to_dict(run):
+            return None
+        if inputs_stale(ckpt, run.task):
+            print(f"retraining {path}: a segmenter trained before its inputs kept their labels' "
+                  "support (learn.inputs)")
             return None
         print(f"reusing {path}")
         return model_from_checkpoint(ckpt)[0], ckpt["training"]

@@ -8,7 +8,7 @@ import pytest
 from torch import nn
 
 from learn import config as C
-from learn.checkpoint import make_checkpoint, model_from_checkpoint
+from learn.checkpoint import inputs_stale, make_checkpoint, model_from_checkpoint
 from learn.inputs import INPUTS, net_input
 from learn.models import create_model
 from learn.train import RunConfig
@@ -44,5 +44,7 @@ def _checkpoint(preset, drop_inputs: bool) -> dict:
 def test_old_segmenters_are_refused_classifiers_are_not():
     model_from_checkpoint(_checkpoint(C.SEGNET, drop_inputs=False))
     model_from_checkpoint(_checkpoint(C.HANDSNET, drop_inputs=True))
-    with pytest.raises(DataError, match="labels' support.*Fix: retrain"):
+    old = _checkpoint(C.SEGNET, drop_inputs=True)
+    assert inputs_stale(old, "segment") and not inputs_stale(old, "classify")
+    with pytest.raises(DataError, match=r"labels' support.*Fix: retrain"):
         model_from_checkpoint(_checkpoint(C.SEGNET, drop_inputs=True))
