@@ -21,6 +21,7 @@ from torch import nn
 
 from learn import metrics as M
 from learn.experiments import paper
+from learn.inputs import unpressed_as_background
 from learn.models import prepare_for_inference
 
 CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
@@ -61,14 +62,15 @@ def evaluate_tensors(
 ) -> EvalResult:  # fmt: skip
     """Metrics of ``model`` on ``data`` (``TensorData``: x (S, 1, h, w), y (S,) or (S, h, w)).
 
-    The model is left in eval mode. ``loss`` is the mean of ``loss_fn`` over batches (NaN
-    without a loss function); ``keep_predictions`` also returns the predicted classes.
+    The model is left in eval mode. Segmentation predictions are background where the input is
+    0 (`learn.inputs.unpressed_as_background`). ``loss`` is the mean of ``loss_fn`` over
+    batches (NaN without a loss function); ``keep_predictions`` also returns the predictions.
     """
     cms, losses, preds = [], [], []
     for i in range(0, len(data.y), batch_size):
         x, y = data.x[i : i + batch_size], data.y[i : i + batch_size]
         out = logits_of(model, x, batch_size)
-        pred = out.argmax(1)
+        pred = out.argmax(1) if y.ndim == 1 else unpressed_as_background(out.argmax(1), x)
         cms.append(M.confusion_matrix(y, pred, num_classes))
         if keep_predictions:
             preds.append(pred)

@@ -19,3 +19,14 @@ def net_input(image01: np.ndarray, size: tuple[int, int], task: str) -> np.ndarr
     neighbour labels have (`tactile.resize.resize_image` ``keep_support``), so that zero input
     is background in the labels too. Same shape as ``image01`` with (h, w) last, same dtype."""
     return resize_image(image01, size, keep_support=task == "segment")
+
+
+def unpressed_as_background(pred, x):
+    """Per-pixel class ids ``pred`` (S, h, w) with every pixel whose input ``x`` (S, 1, h, w) is
+    0 set to background (0): no pressure, no contact. With `net_input`'s segmentation inputs
+    those are exactly the pixels the labels call background for want of pressure, and
+    ``learn.predict.segment`` applies the same rule on the map grid. Median-frequency weights
+    make a background pixel ~50x cheaper to miss than a finger's, so without the rule a
+    segmenter paints fingers on the empty pixels around a print (95,000 of them on the forearm
+    test set, 44.2 % against 53.5 % mIoU). numpy arrays or torch tensors; same type back."""
+    return pred * (x[:, 0] > 0)

@@ -40,6 +40,7 @@ from learn.experiments.robustness_maps import (
     spot_pattern,
     warp_labels,
 )
+from learn.inputs import unpressed_as_background
 from learn.models import prepare_for_inference
 from tactile.errors import ConfigError
 from tactile.faults import nested_removal, zero_taxels
@@ -74,12 +75,13 @@ class Predictor:
         return cls(name, model, run, fast)
 
     def predict(self, x: np.ndarray, *, eval_mode: bool = False) -> np.ndarray:
-        """Class ids: (B,) int64 per image, or (B, h, w) int64 per pixel (``eval_mode``: with
-        the unprepared model)."""
+        """Class ids: (B,) int64 per image, or (B, h, w) int64 per pixel, background where the
+        input is 0 (``eval_mode``: with the unprepared model)."""
         if len(x) == 0:
             return np.zeros((0, *(() if self.task == "classify" else self.size)), np.int64)
         net = self.model if eval_mode else self.net
-        return logits_of(net, torch.from_numpy(x), BATCH).argmax(1).numpy()
+        pred = logits_of(net, torch.from_numpy(x), BATCH).argmax(1).numpy()
+        return pred if self.task == "classify" else unpressed_as_background(pred, x)
 
 
 def fast_path_agreement(frames: Frames, models: Sequence[Predictor], n: int = 256) -> dict:
