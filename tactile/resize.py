@@ -44,11 +44,11 @@ def _resize_on_support(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """`_resize_one`, zero outside the nearest-neighbour support of ``img > 0`` and at least
     the frame's smallest positive value inside it."""
     out = _resize_one(img, size)
-    positive = img[img > 0]
-    if not positive.size:
+    pressed = img > 0
+    if not pressed.any():
         return out
-    support = resize_labels(img > 0, size)
-    return np.where(support, np.maximum(out, positive.min()), 0).astype(img.dtype)
+    support = resize_labels(pressed, size)
+    return np.where(support, np.maximum(out, img[pressed].min()), 0).astype(img.dtype)
 
 
 def resize_image(
