@@ -250,4 +250,5 @@ def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
             "metrics": scores, "fast_metrics": scores, "bf16": False,
             "ms_per_image": {"fast": ms, "gpu": None}, "timing": TIMING[meta["kind"]],
             "threads": threads, "seed": meta["seed"], "config": meta["config"],
-            "input_size": meta["input_size"], "train_versions": meta["versions"]}  # fmt: skip
+            "input_size": meta["input_size"], "train_versions": meta["versions"],
+            "train_data": meta.get("data")}  # fmt: skip

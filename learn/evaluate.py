@@ -263,38 +263,79 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
             "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
             "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
             "config": ckpt["config"], "input_size": list(size),
-            "train_versions": ckpt.get("versions"), "by_active_taxels": by_size,
-            "by_contactor": by_contactor}  # fmt: skip
+            "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
+            "by_active_taxels": by_size, "by_contactor": by_contactor}  # fmt: skip
 
 
 def _fmt(v: float | None, scale: float = 1.0) -> str:
     return "unknown" if v is None else f"{scale * v:.2f}"
 
 
+def trained_on(r: dict) -> str:
+    """Where a report row's model was trained: ``name (N train samples)``, "unknown" if the
+    checkpoint does not say."""
+    d = r.get("train_data") or {}
+    if not d.get("path"):
+        return "unknown"
+    n = d.get("n_train")
+    return Path(str(d["path"])).name + ("" if n is None else f" ({n:,} train)")
+
+
+def row_labels(rows: list[dict]) -> list[str]:
+    """Table labels of report rows: the method's name (``ARCH_LABEL``), with the training data
+    and then the run folder added where two rows would otherwise share a label."""
+    labels = [ARCH_LABEL.get(r["arch"], r["arch"]) for r in rows]
+    for extra in (trained_on, lambda r: Path(r["checkpoint"]).parent.name):
+        dup = {lab for lab in labels if labels.count(lab) > 1}
+        labels = [f"{lab}, {extra(r)}" if lab in dup else lab
+                  for lab, r in zip(labels, rows, strict=True)]  # fmt: skip
+    return labels
+
+
+def _ours(rows: list[dict], task: str) -> dict[str, dict]:
+    return {lab: r for lab, r in zip(row_labels(rows), rows, strict=True) if r["task"] == task}
+
+
+def _paper_row(name: str, table: dict, n: int) -> tuple:
+    """The paper's values for a label (its method name before any ", ..." suffix)."""
+    return table.get(name.split(",")[0], (None,) * n)
+
+
+def _shown_longer(name: str, ours: dict[str, dict]) -> bool:
+    """True when a paper method has no row of its own but rows under longer labels."""
+    return name not in ours and any(o.startswith(name + ",") for o in ours)
+
+
 def _table3(rows: list[dict]) -> list[str]:
-    ours = {ARCH_LABEL.get(r["arch"], r["arch"]): r for r in rows if r["task"] == "classify"}
+    ours = _ours(rows, "classify")
     out = ["## Hand / non-hand classification (paper: Table 3)", "",
            "| method | accuracy % (ours) | CPU ms/image (ours, batch 1) | accuracy % (paper) "
-           "| ms/image (paper) |", "|---|---|---|---|---|"]  # fmt: skip
+           "| ms/image (paper) | trained on |", "|---|---|---|---|---|---|"]  # fmt: skip
     for name in dict.fromkeys([*PAPER_TABLE3, *ours]):
-        r, (p_acc, p_ms) = ours.get(name), PAPER_TABLE3.get(name, (None, None))
+        if _shown_longer(name, ours):
+            continue
+        r, (p_acc, p_ms) = ours.get(name), _paper_row(name, PAPER_TABLE3, 2)
         acc = "not run" if r is None else _fmt(r["metrics"]["accuracy"], 100)
         ms = "not run" if r is None else _fmt(r["ms_per_image"]["fast"])
-        out.append(f"| {name} | {acc} | {ms} | {_fmt(p_acc)} | {_fmt(p_ms)} |")
+        where = "" if r is None else trained_on(r)
+        out.append(f"| {name} | {acc} | {ms} | {_fmt(p_acc)} | {_fmt(p_ms)} | {where} |")
     return out
 
 
 def _table8(rows: list[dict]) -> list[str]:
-    ours = {ARCH_LABEL.get(r["arch"], r["arch"]): r for r in rows if r["task"] == "segment"}
+    ours = _ours(rows, "segment")
     out = ["## Hand-part segmentation (paper: Table 8)", "",
            "| method | Acc % | mAcc % | mIoU % | fwIoU % | CPU ms/image (fast path) "
-           "| paper Acc % | paper mAcc % | paper mIoU % | paper fwIoU % | paper ms/image |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+           "| paper Acc % | paper mAcc % | paper mIoU % | paper fwIoU % | paper ms/image "
+           "| trained on |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for name in dict.fromkeys([*PAPER_TABLE8, *ours]):
-        r, paper = ours.get(name), PAPER_TABLE8.get(name, (None,) * 5)
+        if _shown_longer(name, ours):
+            continue
+        r, paper = ours.get(name), _paper_row(name, PAPER_TABLE8, 5)
         mine = ["not run"] * 5 if r is None else [
             *(_fmt(r["metrics"][k], 100) for k in SEG_KEYS), _fmt(r["ms_per_image"]["fast"])]
-        out.append(f"| {name} | " + " | ".join([*mine, *map(_fmt, paper)]) + " |")
+        where = "" if r is None else trained_on(r)
+        out.append(f"| {name} | " + " | ".join([*mine, *map(_fmt, paper), where]) + " |")
     return out
 
 
@@ -309,12 +350,13 @@ def _timing(r: dict) -> str:
             f"(bf16 {'on' if r['bf16'] else 'off'}); GPU {gpu}")  # fmt: skip
 
 
-def _details(r: dict) -> list[str]:
+def _details(r: dict, label: str) -> list[str]:
     names = tuple(r["class_names"]) or tuple(str(i) for i in range(len(r["cm"])))
     epoch = "" if r["epoch"] is None else f"epoch {r['epoch']}, "
     size = r.get("input_size") or r["config"]["model"]["input_size"]
-    return [f"### {ARCH_LABEL.get(r['arch'], r['arch'])} — `{r['checkpoint']}` "
+    return [f"### {label} — `{r['checkpoint']}` "
             f"({epoch}seed {r['seed']}, {r['n_test']} test images)", "",
+            f"Trained on: {trained_on(r)}.", "",
             f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "",
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
@@ -366,7 +408,7 @@ def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:
              "Columns marked *paper* are Albini & Cannata (IJRR 2020); ours are on the test split "
              "named above. Timing: median of 100 runs after 20 warm-up runs.", "",
              *_table3(rows), "", *_table8(rows), "", "## Details", ""]  # fmt: skip
-    for r in rows:
-        lines += _details(r)
+    for r, label in zip(rows, row_labels(rows), strict=True):
+        lines += _details(r, label)
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
     return Path(path)

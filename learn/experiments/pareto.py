@@ -94,6 +94,7 @@ class Variant:
     width: float | None = None
     checkpoint: Path | None = None  # a given checkpoint, used as is
     warm: bool = False  # start training from the main model of its task
+    tag: str | None = None  # an --also checkpoint: its run folder's name, told apart by it
 
     @property
     def task(self) -> str:
@@ -103,12 +104,14 @@ class Variant:
     def key(self) -> str:
         """Folder name under models_dir, e.g. ``segnet-68x100-w0.5``."""
         width = "" if self.width is None else f"-w{self.width:g}"
-        return f"{self.arch}-{self.size[0]}x{self.size[1]}{width}"
+        tag = "" if self.tag is None else f"-given-{self.tag}"
+        return f"{self.arch}-{self.size[0]}x{self.size[1]}{width}{tag}"
 
     @property
     def name(self) -> str:
         width = "" if self.width is None else f" w{self.width:g}"
-        return f"{NAMES[self.arch]}{width} {self.size[0]}×{self.size[1]}"
+        tag = "" if self.tag is None else f" ({self.tag})"
+        return f"{NAMES[self.arch]}{width} {self.size[0]}×{self.size[1]}{tag}"
 
 
 def main_variant(checkpoint: Path | None, arch: str, width: float | None) -> Variant:
@@ -128,13 +131,36 @@ def main_variant(checkpoint: Path | None, arch: str, width: float | None) -> Var
     return Variant(model.arch, tuple(model.input_size), width, checkpoint=Path(checkpoint))
 
 
+def also_variants(paths: list[Path], segment: bool) -> list[Variant]:
+    """Variants of ``--also`` checkpoints (any architecture), used as they are and named after
+    their run folders; ConfigError for a missing file or a segmenter when segmentation is off."""
+    from learn.checkpoint import load_checkpoint
+    from learn.train import run_from_dict
+
+    out = []
+    for path in map(Path, paths):
+        model = run_from_dict(load_checkpoint(path)["config"]).model
+        if TASK[model.arch] == "segment" and not segment:
+            raise ConfigError(f"--also {path} is a {model.arch} checkpoint, but segmentation is "
+                              "off (--no-segmentation, or the dataset has no label images). "
+                              "Fix: drop it or turn segmentation on")  # fmt: skip
+        width = None if model.arch == "handsnet" else model.width
+        tag = path.parent.name or path.stem
+        out.append(Variant(model.arch, tuple(model.input_size), width, checkpoint=path, tag=tag))
+    if len({v.key for v in out}) < len(out):
+        raise ConfigError("two --also checkpoints of one architecture, width and size share a "
+                          "run folder name. Fix: give each its own folder")  # fmt: skip
+    return out
+
+
 def plan_variants(s: ParetoSettings, full_hw: tuple[int, int], clf: Variant,
-                  seg: Variant | None) -> list[Variant]:  # fmt: skip
+                  seg: Variant | None, also: list[Variant] = ()) -> list[Variant]:  # fmt: skip
     """Every variant without duplicates (by key): per task the main model first, then the
-    others by input area (so tensors of one size are loaded once and then released)."""
+    others by input area (so tensors of one size are loaded once and then released); ``also``
+    (given checkpoints) are drawn beside the variants of their architecture."""
     from learn.models import create_model
 
-    out = [clf]
+    out = [clf, *also]
     for size in s.sizes:
         out.append(Variant("handsnet", parse_size(size, full_hw), warm=clf.arch == "handsnet"))
         create_model("handsnet", input_size=out[-1].size)  # ConfigError below 24 px, now
@@ -188,10 +214,12 @@ def not_run(s: ParetoSettings, segment: bool) -> list[str]:
 
 def run_pareto(data: str | Path, out: str | Path, s: ParetoSettings = FULL, *,
                classifier: str | Path | None = None, segmenter: str | Path | None = None,
-               models_dir: str | Path | None = None, progress: bool = True) -> dict:  # fmt: skip
+               models_dir: str | Path | None = None, also: list[str | Path] = (),
+               progress: bool = True) -> dict:  # fmt: skip
     """Score and time every variant; write ``out``/report.md, results.json and the charts
     pareto_classification.png, pareto_segmentation.png. Returns the results dict (``rows``:
-    one dict per variant, see ``pareto_plot``). Inputs are checked before any work."""
+    one dict per variant, see ``pareto_plot``). ``also``: more checkpoints scored as they are
+    (e.g. a fully trained FCN-16s beside the budgeted one). Inputs are checked before any work."""
     from learn.experiments.pareto_plot import write_report
     from learn.experiments.pareto_train import Runner, classic_rows
     from learn.experiments.report import Report
@@ -203,9 +231,10 @@ def run_pareto(data: str | Path, out: str | Path, s: ParetoSettings = FULL, *,
     segment = s.segmentation and labelled
     seg = main_variant(None if segmenter is None else Path(segmenter), "segnet",
                        max(s.seg_widths, default=0.5)) if segment else None  # fmt: skip
-    variants = plan_variants(s, full_hw, clf, seg)
+    given = also_variants(list(also), seg is not None)
+    variants = plan_variants(s, full_hw, clf, seg, given)
     config = {"data": str(data), "classifier": classifier, "segmenter": segmenter,
-              "full_map_px": full_hw, **to_dict(s)}  # fmt: skip
+              "also": [str(p) for p in also], "full_map_px": full_hw, **to_dict(s)}  # fmt: skip
     rep = Report("pareto", out, seed=s.seed, config=config)
     runner = Runner(data, s, Path(models_dir) if models_dir else out / "models", progress)
     rows, vgg = [], None
@@ -244,6 +273,9 @@ def pareto_command(
     seed: _opt(int, "Seed (integer) of initialisation, shuffling and subsets.") = 0,
     classifier: _opt(Path | None, "Main classifier checkpoint (.pt file), used as is.") = None,
     segmenter: _opt(Path | None, "Main segmenter checkpoint (.pt file), used as is.") = None,
+    also: _opt(list[Path] | None, "More checkpoints (.pt files, any architecture) scored as they "
+               "are and named after their run folder, e.g. a fully trained FCN-16s; repeat the "
+               "option for several.") = None,
     models: _opt(Path | None, "Folder (path) of the variants trained here; default OUT/models; "
                  "reused by a rerun with the same budget.") = None,
     sizes: _opt(str | None, "HandsNet input sizes: comma-separated <h>x<w> in pixels, or "
@@ -285,7 +317,7 @@ def pareto_command(
                 changes[key] = value or None  # 0 = all samples
         settings = dataclasses.replace(QUICK if quick else FULL, **changes)
         result = run_pareto(data, out, settings, classifier=classifier, segmenter=segmenter,
-                            models_dir=models, progress=progress)  # fmt: skip
+                            models_dir=models, also=also or [], progress=progress)  # fmt: skip
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     typer.echo(f"report written to {result['report']}")

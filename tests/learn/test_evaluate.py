@@ -118,6 +118,28 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     assert seg["by_active_taxels"] is None and seg["by_contactor"] is None
 
 
+def test_report_tells_models_of_one_method_apart(checkpoints, tiny_dataset, tmp_path):
+    """Two HandsNets trained on different data: two labelled rows, each beside the paper's
+    number and naming its training data; one "trained on" line per model in the details."""
+    row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3)
+    assert row["train_data"]["path"] == str(tiny_dataset)
+    other = dict(row, train_data={"path": "/data/forearm3x", "n_train": 6300},
+                 metrics=dict(row["metrics"], accuracy=0.5))  # fmt: skip
+    text = write_report([row, other], tmp_path / "r.md").read_text()
+    name = tiny_dataset.name
+    n = row["train_data"]["n_train"]
+    mine = f"| HandsNet, {name} ({n:,} train) | {100 * row['metrics']['accuracy']:.2f} |"
+    assert mine in text
+    theirs = "| HandsNet, forearm3x (6,300 train) | 50.00 |"
+    assert theirs in text
+    paper_acc = f"{paper.HANDSNET_ACCURACY_PCT:.2f}"
+    assert sum(line.count(paper_acc) for line in text.splitlines() if "| HandsNet," in line) == 2
+    assert "| HandsNet | not run" not in text  # no empty row for the method itself
+    assert "Trained on: forearm3x (6,300 train)." in text
+    same = write_report([row, dict(row, checkpoint="/runs/b/best.pt")], tmp_path / "s.md")
+    assert ", b |" in same.read_text()  # same data too: the run folder tells them apart
+
+
 def test_plot_history(tmp_path):
     hist = [{"epoch": 1, "train_loss": 1.0, "val_loss": 0.9, "val_metric": 0.6},
             {"epoch": 2, "train_loss": 0.5, "val_loss": 0.7, "val_metric": 0.8}]  # fmt: skip

@@ -5,6 +5,9 @@ evaluations; bad input fails before any work."""
 
 from __future__ import annotations
 
+import json
+import shutil
+
 import numpy as np
 import pytest
 import torch
@@ -146,6 +149,27 @@ def test_pareto_rerun_reuses_trained_variants(pareto_run, tiny_dataset, checkpoi
     assert [r["name"] for r in res["rows"]] == ["HandsNet 32×48", "HandsNet 24×36"]
 
 
+def test_pareto_also_scores_given_checkpoints_as_they_are(pareto_run, tiny_dataset, checkpoints,
+                                                         tmp_path):  # fmt: skip
+    """An --also checkpoint of the main's architecture and size is a row of its own (named
+    after its run folder), scored as given: the same score as the same weights as main."""
+    out, _ = pareto_run
+    given = tmp_path / "wide" / "best.pt"
+    given.parent.mkdir()
+    shutil.copy(checkpoints["handsnet"], given)
+    settings = P.ParetoSettings(**{**TINY.__dict__, "classic": False, "segmentation": False,
+                                   "sizes": ("24x36",), "widths": ()})  # fmt: skip
+    res = P.run_pareto(tiny_dataset, tmp_path / "out", settings,
+                       classifier=checkpoints["handsnet"], models_dir=out / "models",
+                       also=[given], progress=False)  # fmt: skip
+    rows = {r["name"]: r for r in res["rows"]}
+    assert set(rows) == {"HandsNet 32×48", "HandsNet 32×48 (wide)", "HandsNet 24×36"}
+    assert rows["HandsNet 32×48 (wide)"]["training"].startswith("given")
+    assert rows["HandsNet 32×48 (wide)"]["score"] == rows["HandsNet 32×48"]["score"]
+    saved = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert saved["config"]["also"] == [str(given)]
+
+
 @pytest.fixture(scope="module")
 def app() -> typer.Typer:
     app = typer.Typer()
@@ -165,6 +189,8 @@ def app() -> typer.Typer:
         (["--classifier", "{missing}.pt"], "no checkpoint"),
         (["--classifier", "{segnet}"], "is a segnet checkpoint"),
         (["--budget-min", "0"], "budget_min > 0"),
+        (["--also", "{segnet}", "--no-segmentation"], "segmentation is off"),
+        (["--also", "{missing}.pt"], "no checkpoint"),
     ],
 )
 def test_bad_input_fails_before_work(app, tiny_dataset, checkpoints, tmp_path, args, message):
