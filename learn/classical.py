@@ -233,7 +233,7 @@ def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
                        threads: int = 1, time_runs: int = 100) -> dict:  # fmt: skip
     """Test-split scores and CPU ms/image of a classical model file; a row of
     ``learn.evaluate.write_report`` (the same keys as ``evaluate_checkpoint``'s)."""
-    from learn.evaluate import metrics_from_cm
+    from learn.evaluate import metrics_from_cm, shared_with_training
 
     model = load_classical(path)
     meta = model.meta
@@ -251,4 +251,5 @@ def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
             "ms_per_image": {"fast": ms, "gpu": None}, "timing": TIMING[meta["kind"]],
             "threads": threads, "seed": meta["seed"], "config": meta["config"],
             "input_size": meta["input_size"], "train_versions": meta["versions"],
-            "train_data": meta.get("data")}  # fmt: skip
+            "train_data": meta.get("data"),
+            "shared_with_training": shared_with_training(meta.get("data"), data)}  # fmt: skip

@@ -22,6 +22,7 @@ from torch import nn
 from learn import metrics as M
 from learn.experiments import paper
 from learn.inputs import unpressed_as_background
+from learn.leakage import leakage_note
 from learn.models import prepare_for_inference
 
 CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
@@ -264,11 +265,21 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
             "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
             "config": ckpt["config"], "input_size": list(size),
             "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
+            "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
             "by_active_taxels": by_size, "by_contactor": by_contactor}  # fmt: skip
 
 
 def _fmt(v: float | None, scale: float = 1.0) -> str:
     return "unknown" if v is None else f"{scale * v:.2f}"
+
+
+def shared_with_training(train_data: dict | None, data_path: str | Path) -> dict | None:
+    """``learn.leakage.shared_groups`` of a model's training data (its checkpoint's ``data``
+    record) and the data it is scored on; None when unknown or impossible."""
+    from learn.leakage import shared_groups
+
+    path = (train_data or {}).get("path")
+    return None if not path else shared_groups(path, data_path)
 
 
 def trained_on(r: dict) -> str:
@@ -278,7 +289,9 @@ def trained_on(r: dict) -> str:
     if not d.get("path"):
         return "unknown"
     n = d.get("n_train")
-    return Path(str(d["path"])).name + ("" if n is None else f" ({n:,} train)")
+    leak = (r.get("shared_with_training") or {}).get("test_samples")
+    return (Path(str(d["path"])).name + ("" if n is None else f" ({n:,} train)")
+            + (f"; not held out: {leak} test samples share its subjects" if leak else ""))
 
 
 def row_labels(rows: list[dict]) -> list[str]:
@@ -357,6 +370,7 @@ def _details(r: dict, label: str) -> list[str]:
     return [f"### {label} — `{r['checkpoint']}` "
             f"({epoch}seed {r['seed']}, {r['n_test']} test images)", "",
             f"Trained on: {trained_on(r)}.", "",
+            *([note, ""] if (note := leakage_note(r.get("shared_with_training"))) else []),
             f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "",
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
