@@ -203,6 +203,11 @@ def evaluate_command(
                                     threads=threads) for c in checkpoints]  # fmt: skip
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
+    from learn.leakage import leakage_note
+
+    for row in rows:
+        if note := leakage_note(row.get("shared_with_training")):
+            typer.echo(f"warning: {row['checkpoint']}: {note.replace('**', '')}", err=True)
     header = f"Data: `{data}`. Versions: {json.dumps(versions())}."
     write_report(rows, report, header)
     report.with_suffix(".json").write_text(json.dumps(rows, indent=1))

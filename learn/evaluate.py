@@ -282,23 +282,29 @@ def shared_with_training(train_data: dict | None, data_path: str | Path) -> dict
     return None if not path else shared_groups(path, data_path)
 
 
-def trained_on(r: dict) -> str:
-    """Where a report row's model was trained: ``name (N train samples)``, "unknown" if the
-    checkpoint does not say."""
+def _data_name(r: dict) -> str:
+    """A report row's training data: ``name (N train)``, "unknown" if the checkpoint does not
+    say."""
     d = r.get("train_data") or {}
     if not d.get("path"):
         return "unknown"
     n = d.get("n_train")
+    return Path(str(d["path"])).name + ("" if n is None else f" ({n:,} train)")
+
+
+def trained_on(r: dict) -> str:
+    """The "trained on" cell of a report row: its training data, and a warning when test
+    samples share subjects or object instances with it (``learn.leakage``)."""
     leak = (r.get("shared_with_training") or {}).get("test_samples")
-    return (Path(str(d["path"])).name + ("" if n is None else f" ({n:,} train)")
-            + (f"; not held out: {leak} test samples share its subjects" if leak else ""))
+    return _data_name(r) + (f"; not held out: {leak} test samples share its subjects"
+                            if leak else "")  # fmt: skip
 
 
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``), with the training data
     and then the run folder added where two rows would otherwise share a label."""
     labels = [ARCH_LABEL.get(r["arch"], r["arch"]) for r in rows]
-    for extra in (trained_on, lambda r: Path(r["checkpoint"]).parent.name):
+    for extra in (_data_name, lambda r: Path(r["checkpoint"]).parent.name):
         dup = {lab for lab in labels if labels.count(lab) > 1}
         labels = [f"{lab}, {extra(r)}" if lab in dup else lab
                   for lab, r in zip(labels, rows, strict=True)]  # fmt: skip
