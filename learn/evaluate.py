@@ -265,6 +265,7 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
             "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
             "config": ckpt["config"], "input_size": list(size),
             "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
+            "init": ckpt.get("init"),
             "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
             "by_active_taxels": by_size, "by_contactor": by_contactor}  # fmt: skip
 
@@ -298,6 +299,17 @@ def trained_on(r: dict) -> str:
     leak = (r.get("shared_with_training") or {}).get("test_samples")
     return _data_name(r) + (f"; not held out: {leak} test samples share its subjects"
                             if leak else "")  # fmt: skip
+
+
+def _init_text(r: dict) -> str:
+    """The report's sentence on where a network's training started (checkpoints record it)."""
+    if r.get("timing"):  # classical: no network trained here, or described in its config
+        return ""
+    init = r.get("init")
+    if init is None:
+        return " Initialisation: not recorded (a checkpoint from before it was)."
+    return (" Initialisation: random (seeded)." if init == "random"
+            else f" Initialisation: the weights of `{init}`.")  # fmt: skip
 
 
 def row_labels(rows: list[dict]) -> list[str]:
@@ -375,7 +387,7 @@ def _details(r: dict, label: str) -> list[str]:
     size = r.get("input_size") or r["config"]["model"]["input_size"]
     return [f"### {label} — `{r['checkpoint']}` "
             f"({epoch}seed {r['seed']}, {r['n_test']} test images)", "",
-            f"Trained on: {trained_on(r)}.", "",
+            f"Trained on: {trained_on(r)}.{_init_text(r)}", "",
             *([note, ""] if (note := leakage_note(r.get("shared_with_training"))) else []),
             f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "",
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),

@@ -166,7 +166,8 @@ def _state(model: nn.Module) -> dict[str, torch.Tensor]:
 
 
 def _restore(out: Path, run: RunConfig, model, optimizer, scheduler):
-    """(start epoch, best metric, history, best weights) of the run in ``out`` (last.pt)."""
+    """(start epoch, best metric, history, best weights, recorded start) of the run in ``out``
+    (last.pt)."""
     ckpt = load_checkpoint(out / LAST)
     mine, theirs = to_dict(run), dict(ckpt["config"])
     mine["train"] = {**mine["train"], "epochs": None}
@@ -181,7 +182,8 @@ def _restore(out: Path, run: RunConfig, model, optimizer, scheduler):
     optimizer.load_state_dict(ckpt["optimizer"])
     scheduler.load_state_dict(ckpt["scheduler"])
     best_state = load_checkpoint(out / BEST)["model"] if (out / BEST).is_file() else _state(model)
-    return int(ckpt["epoch"]), float(ckpt["best_metric"]), list(ckpt["history"]), best_state
+    return (int(ckpt["epoch"]), float(ckpt["best_metric"]), list(ckpt["history"]), best_state,
+            ckpt.get("init"))  # fmt: skip
 
 
 def _improved(metric: float, best: float) -> bool:
@@ -214,7 +216,8 @@ def fit(
     loss_fn = make_loss(run, data.train)
     start, best, history, best_state = 0, float("nan"), [], _state(model)
     if resume and out is not None and (out / LAST).is_file():
-        start, best, history, best_state = _restore(out, run, model, optimizer, scheduler)
+        start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler)
+        init_from = first if first not in (None, "random") else init_from
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         (out / "run.toml").write_text(to_toml(run))
@@ -227,8 +230,9 @@ def fit(
         if _improved(row.get("val_metric", float("nan")), best) or data.val is None:
             best = row.get("val_metric", best)
             best_state = _state(model)
-            _save(out, BEST, model, optimizer, scheduler, run, data, epoch, best, history)
-        _save(out, LAST, model, optimizer, scheduler, run, data, epoch, best, history)
+            _save(out, BEST, model, optimizer, scheduler, run, data, epoch, best, history,
+                  init_from)
+        _save(out, LAST, model, optimizer, scheduler, run, data, epoch, best, history, init_from)
         if out is not None:
             title = f"{run.model.arch}, seed {run.train.seed}"
             plot_history(history, out / "curves.png", title, metric_name(run.task))
@@ -260,13 +264,15 @@ def _patience_out(history: list[dict], run: RunConfig) -> bool:
     return max(vals[-k:]) <= max(v for v in vals[:-k] if not math.isnan(v))
 
 
-def _save(out, name, model, optimizer, scheduler, run, data: Data, epoch, best, history) -> None:
+def _save(out, name, model, optimizer, scheduler, run, data: Data, epoch, best, history,
+          init_from=None) -> None:  # fmt: skip
     if out is None:
         return
     ckpt = make_checkpoint(
         model, to_dict(run), epoch=epoch + 1, best_metric=best, optimizer=optimizer,
         scheduler=scheduler, history=history, class_names=list(data.class_names),
         seed=run.train.seed, task=run.task, data=data.description,
+        init="random" if init_from is None else str(init_from),
     )  # fmt: skip
     save_checkpoint(ckpt, out / name)
 

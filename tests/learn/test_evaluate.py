@@ -135,7 +135,7 @@ def test_report_tells_models_of_one_method_apart(checkpoints, tiny_dataset, tmp_
     paper_acc = f"{paper.HANDSNET_ACCURACY_PCT:.2f}"
     assert sum(line.count(paper_acc) for line in text.splitlines() if "| HandsNet," in line) == 2
     assert "| HandsNet | not run" not in text  # no empty row for the method itself
-    assert "Trained on: forearm3x (6,300 train)." in text
+    assert "Trained on: forearm3x (6,300 train). Initialisation: random (seeded)." in text
     same = write_report([row, dict(row, checkpoint="/runs/b/best.pt")], tmp_path / "s.md")
     assert ", b |" in same.read_text()  # same data too: the run folder tells them apart
 

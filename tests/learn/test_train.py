@@ -77,6 +77,19 @@ def test_checkpoint_round_trip_and_resume(tiny_dataset, tiny_run, tmp_path):
     with torch.no_grad():
         assert torch.allclose(model(x), full.model.eval()(x))
     assert (tmp_path / "full" / "curves.png").stat().st_size > 0
+    assert ckpt["init"] == "random"
+
+
+def test_checkpoint_records_its_start_through_a_resume(tiny_dataset, tiny_run, checkpoints,
+                                                       tmp_path):  # fmt: skip
+    run = tiny_run("handsnet", epochs=2)
+    data = load_data(tiny_dataset, run)
+    start = checkpoints["handsnet"]
+    fit(run, data, tmp_path / "ft", init_from=start, progress=False, stop_after_epoch=1)
+    assert load_checkpoint(tmp_path / "ft" / "last.pt")["init"] == str(start)
+    fit(run, data, tmp_path / "ft", resume=True, progress=False)  # no init given on resume
+    for name in ("last.pt", "best.pt"):
+        assert load_checkpoint(tmp_path / "ft" / name)["init"] == str(start), name
 
 
 def test_finetuning_applies_lr_factors(tiny_dataset, tiny_run, checkpoints):
