@@ -1,0 +1,101 @@
+"""Test score against the number of training samples, from `handskin evaluate` reports.
+
+    python docs/data_scaling.py reports/learning.json reports/learning-3x.json \
+        reports/learning-hands9k.json --png docs/data_scaling.png
+
+Every row of the given report JSON files (``handskin evaluate --report X.md`` writes ``X.json``)
+becomes a point: accuracy (classifiers) or mean IoU (segmenters) in % against the training
+samples its checkpoint records (``train_data.n_train``), one line per method, with the paper's
+published score as a dashed line. Each report scores its models on its own dataset's held-out
+test split, so points of different datasets come from different test subjects; a row whose
+scores are not held out (``shared_with_training``) is refused.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import matplotlib
+import matplotlib.ticker
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+from learn.evaluate import ARCH_LABEL
+from learn.experiments import paper
+
+PAPER = {"HandsNet": paper.HANDSNET_ACCURACY_PCT, "SegNet": paper.SEGNET_MIOU_PCT}
+TASKS = (("classify", "accuracy", "test accuracy, %", "hand / non-hand"),
+         ("segment", "mean_iou", "test mean IoU, %", "hand parts (7 classes)"))  # fmt: skip
+
+
+def points(paths: list[Path]) -> dict[str, dict[str, list[tuple[int, float, str]]]]:
+    """{task: {method: [(train samples, score %, dataset name), ...]}} of the reports' rows."""
+    out: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
+    for path in paths:
+        for row in json.loads(path.read_text()):
+            shared = row.get("shared_with_training") or {}
+            if shared.get("test_samples"):
+                raise SystemExit(f"{path}: {row['checkpoint']} is scored on subjects it "
+                                 "was trained on; score it on its own dataset's test split")
+            data = row.get("train_data") or {}
+            if data.get("n_train") is None:
+                raise SystemExit(f"{path}: {row['checkpoint']} does not record its training data")
+            key = {task: metric for task, metric, _, _ in TASKS}[row["task"]]
+            out[row["task"]][ARCH_LABEL.get(row["arch"], row["arch"])].append(
+                (int(data["n_train"]), 100 * row["metrics"][key], Path(data["path"]).name))
+    return out
+
+
+def chart(pts: dict, png: Path) -> Path:
+    """Two panels (classification, segmentation), score against training samples."""
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    for ax, (task, _, ylabel, title) in zip(axes, TASKS, strict=True):
+        for method, rows in sorted(pts.get(task, {}).items()):
+            rows = sorted(rows)
+            line = ax.plot([r[0] for r in rows], [r[1] for r in rows], "o-", label=method)[0]
+            for n, score, name in rows:
+                ax.annotate(f"{score:.1f} ({name})", (n, score), textcoords="offset points",
+                            xytext=(4, -12), fontsize=7, color=line.get_color())  # fmt: skip
+            if method in PAPER:
+                ax.axhline(PAPER[method], ls="--", color=line.get_color(), lw=1,
+                           label=f"paper: {method} {PAPER[method]:.2f} %")  # fmt: skip
+        ns = [r[0] for rows in pts.get(task, {}).values() for r in rows]
+        ax.set_xscale("log")
+        if ns:
+            ax.set_xlim(min(ns) / 1.3, max(ns) * 1.8)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        lo, hi = ax.get_xlim()
+        ax.set_xticks([t for t in (500, 1000, 2000, 3000, 5000, 10000, 20000, 50000)
+                       if lo <= t <= hi])  # fmt: skip
+        ax.margins(y=0.12)
+        ax.set(xlabel="training samples (count, log scale; segmenters: hand images)",
+               ylabel=ylabel, title=title)  # fmt: skip
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="lower right" if task == "classify" else "upper left")
+    fig.suptitle("More synthetic data: test score against training set size (each point on its "
+                 "own dataset's held-out subjects)", fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    return png
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("reports", nargs="+", type=Path, help="report JSON files of handskin evaluate")
+    ap.add_argument("--png", type=Path, required=True, help="chart to write (PNG path)")
+    args = ap.parse_args()
+    pts = points(args.reports)
+    for task, methods in pts.items():
+        for method, rows in sorted(methods.items()):
+            text = ", ".join(f"{n} train: {s:.2f} % ({d})" for n, s, d in sorted(rows))
+            print(task, method, text)
+    print(f"chart written to {chart(pts, args.png)}")
+
+
+if __name__ == "__main__":
+    main()
