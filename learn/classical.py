@@ -232,7 +232,7 @@ def ms_per_image(model, images: np.ndarray, threads: int = 1, n_runs: int = 100,
 def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
                        threads: int = 1, time_runs: int = 100) -> dict:  # fmt: skip
     """Test-split scores and CPU ms/image of a classical model file; a row of
-    ``learn.evaluate.write_report`` (the same keys as ``evaluate_checkpoint``'s)."""
+    ``learn.eval_report.write_report`` (the same keys as ``evaluate_checkpoint``'s)."""
     from learn.evaluate import metrics_from_cm, shared_with_training
 
     model = load_classical(path)

@@ -193,7 +193,8 @@ def evaluate_command(
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
     from learn.checkpoint import load_checkpoint, versions
     from learn.classical import load_npz
-    from learn.evaluate import evaluate_checkpoint, write_report
+    from learn.eval_report import write_report
+    from learn.evaluate import evaluate_checkpoint
 
     try:
         _check_data(data)

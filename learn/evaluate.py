@@ -1,10 +1,10 @@
 """Evaluation: metrics and confusion matrices of a model on tensors, the fast CPU inference
-path, time per image, loss curves, and the markdown report beside the paper's Tables 3 and 8.
+path, time per image, loss curves, and a checkpoint's row of the report (``learn.eval_report``
+writes it beside the paper's Tables 3 and 8).
 
     res = evaluate_tensors(model, data.test, num_classes=2)   # res.metrics, res.cm, res.percent
     fast = fast_inference(model)           # BN folded, channels-last, bf16 where it is safe
     row = evaluate_checkpoint("runs/handsnet/best.pt", "out/forearm")
-    write_report([row, ...], "report.md")
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from torch import nn
 from learn import metrics as M
 from learn.experiments import paper
 from learn.inputs import unpressed_as_background
-from learn.leakage import leakage_note
 from learn.models import prepare_for_inference
 
 CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
@@ -270,10 +269,6 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
             "by_active_taxels": by_size, "by_contactor": by_contactor}  # fmt: skip
 
 
-def _fmt(v: float | None, scale: float = 1.0) -> str:
-    return "unknown" if v is None else f"{scale * v:.2f}"
-
-
 def shared_with_training(train_data: dict | None, data_path: str | Path) -> dict | None:
     """``learn.leakage.shared_groups`` of a model's training data (its checkpoint's ``data``
     record) and the data it is scored on; None when unknown or impossible."""
@@ -281,166 +276,3 @@ def shared_with_training(train_data: dict | None, data_path: str | Path) -> dict
 
     path = (train_data or {}).get("path")
     return None if not path else shared_groups(path, data_path)
-
-
-def _data_name(r: dict) -> str:
-    """A report row's training data: ``name (N train)``, "unknown" if the checkpoint does not
-    say."""
-    d = r.get("train_data") or {}
-    if not d.get("path"):
-        return "unknown"
-    n = d.get("n_train")
-    return Path(str(d["path"])).name + ("" if n is None else f" ({n:,} train)")
-
-
-def trained_on(r: dict) -> str:
-    """The "trained on" cell of a report row: its training data, and a warning when test
-    samples share subjects or object instances with it (``learn.leakage``)."""
-    leak = (r.get("shared_with_training") or {}).get("test_samples")
-    return _data_name(r) + (f"; not held out: {leak} test samples share its subjects"
-                            if leak else "")  # fmt: skip
-
-
-def _init_text(r: dict) -> str:
-    """The report's sentence on where a network's training started (checkpoints record it)."""
-    if r.get("timing"):  # classical: no network trained here, or described in its config
-        return ""
-    init = r.get("init")
-    if init is None:
-        return " Initialisation: not recorded (a checkpoint from before it was)."
-    return (" Initialisation: random (seeded)." if init == "random"
-            else f" Initialisation: the weights of `{init}`.")  # fmt: skip
-
-
-def row_labels(rows: list[dict]) -> list[str]:
-    """Table labels of report rows: the method's name (``ARCH_LABEL``), with the training data
-    and then the run folder added where two rows would otherwise share a label."""
-    labels = [ARCH_LABEL.get(r["arch"], r["arch"]) for r in rows]
-    for extra in (_data_name, lambda r: Path(r["checkpoint"]).parent.name):
-        dup = {lab for lab in labels if labels.count(lab) > 1}
-        labels = [f"{lab}, {extra(r)}" if lab in dup else lab
-                  for lab, r in zip(labels, rows, strict=True)]  # fmt: skip
-    return labels
-
-
-def _ours(rows: list[dict], task: str) -> dict[str, dict]:
-    return {lab: r for lab, r in zip(row_labels(rows), rows, strict=True) if r["task"] == task}
-
-
-def _paper_row(name: str, table: dict, n: int) -> tuple:
-    """The paper's values for a label (its method name before any ", ..." suffix)."""
-    return table.get(name.split(",")[0], (None,) * n)
-
-
-def _shown_longer(name: str, ours: dict[str, dict]) -> bool:
-    """True when a paper method has no row of its own but rows under longer labels."""
-    return name not in ours and any(o.startswith(name + ",") for o in ours)
-
-
-def _table3(rows: list[dict]) -> list[str]:
-    ours = _ours(rows, "classify")
-    out = ["## Hand / non-hand classification (paper: Table 3)", "",
-           "| method | accuracy % (ours) | CPU ms/image (ours, batch 1) | accuracy % (paper) "
-           "| ms/image (paper) | trained on |", "|---|---|---|---|---|---|"]  # fmt: skip
-    for name in dict.fromkeys([*PAPER_TABLE3, *ours]):
-        if _shown_longer(name, ours):
-            continue
-        r, (p_acc, p_ms) = ours.get(name), _paper_row(name, PAPER_TABLE3, 2)
-        acc = "not run" if r is None else _fmt(r["metrics"]["accuracy"], 100)
-        ms = "not run" if r is None else _fmt(r["ms_per_image"]["fast"])
-        where = "" if r is None else trained_on(r)
-        out.append(f"| {name} | {acc} | {ms} | {_fmt(p_acc)} | {_fmt(p_ms)} | {where} |")
-    return out
-
-
-def _table8(rows: list[dict]) -> list[str]:
-    ours = _ours(rows, "segment")
-    out = ["## Hand-part segmentation (paper: Table 8)", "",
-           "| method | Acc % | mAcc % | mIoU % | fwIoU % | CPU ms/image (fast path) "
-           "| paper Acc % | paper mAcc % | paper mIoU % | paper fwIoU % | paper ms/image "
-           "| trained on |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    for name in dict.fromkeys([*PAPER_TABLE8, *ours]):
-        if _shown_longer(name, ours):
-            continue
-        r, paper = ours.get(name), _paper_row(name, PAPER_TABLE8, 5)
-        mine = ["not run"] * 5 if r is None else [
-            *(_fmt(r["metrics"][k], 100) for k in SEG_KEYS), _fmt(r["ms_per_image"]["fast"])]
-        where = "" if r is None else trained_on(r)
-        out.append(f"| {name} | " + " | ".join([*mine, *map(_fmt, paper), where]) + " |")
-    return out
-
-
-def _timing(r: dict) -> str:
-    """The sentence on CPU / GPU time per image of a report row."""
-    ms, head = r["ms_per_image"], f"CPU ms/image at batch 1, {r['threads']} thread(s): "
-    if r.get("timing"):  # a classical model: one path, image to label
-        return head + f"{_fmt(ms['fast'])} ({r['timing']})"
-    gpu = "none (no CUDA)" if ms["gpu"] is None else _fmt(ms["gpu"])
-    return (head + f"eval mode {_fmt(ms['eval_mode'])}, prepared (BN folded) "
-            f"{_fmt(ms['prepared'])}, fast path {_fmt(ms['fast'])} "
-            f"(bf16 {'on' if r['bf16'] else 'off'}); GPU {gpu}")  # fmt: skip
-
-
-def _details(r: dict, label: str) -> list[str]:
-    names = tuple(r["class_names"]) or tuple(str(i) for i in range(len(r["cm"])))
-    epoch = "" if r["epoch"] is None else f"epoch {r['epoch']}, "
-    size = r.get("input_size") or r["config"]["model"]["input_size"]
-    return [f"### {label} — `{r['checkpoint']}` "
-            f"({epoch}seed {r['seed']}, {r['n_test']} test images)", "",
-            f"Trained on: {trained_on(r)}.{_init_text(r)}", "",
-            *([note, ""] if (note := leakage_note(r.get("shared_with_training"))) else []),
-            f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "",
-            "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
-            "", "Confusion matrix, % of each true class:", "",
-            confusion_markdown(torch.tensor(r["cm"]), names), "",
-            *_by_size(r), *_merged(r)]  # fmt: skip
-
-
-#: Class groups of the 7-class hand-part segmentation the report also scores, (title, groups).
-MERGED_VIEWS = (
-    ("hand against background", [[0], [1, 2, 3, 4, 5, 6]]),
-    ("fingers as one class", [[0], [1, 2, 3, 4, 5], [6]]),
-    ("mirror pairs merged (index + pinkie, middle + ring)", [[0], [1], [2, 5], [3, 4], [6]]),
-)
-
-
-def _merged(r: dict) -> list[str]:
-    """Per-class IoU and the mIoU of coarser class groupings, of a 7-class segmenter row: how
-    much of the error is finger identity rather than finding the hand."""
-    if r["task"] != "segment" or len(r["cm"]) != 7:
-        return []
-    names = tuple(r["class_names"]) or tuple(str(i) for i in range(7))
-    ious = M.class_ious(torch.tensor(r["cm"]))
-    lines = ["IoU per class (%): " + ", ".join(
-        f"{n} {_fmt(float(v), 100)}" for n, v in zip(names, ious, strict=True)), "",
-        "mIoU (%) of coarser groupings of the same predictions:", ""]  # fmt: skip
-    for title, groups in MERGED_VIEWS:
-        lines.append(f"- {title}: {_fmt(M.mean_iou(M.merge_classes(r['cm'], groups)), 100)}")
-    return [*lines, ""]
-
-
-def _by_size(r: dict) -> list[str]:
-    """The accuracy-by-contact-size table of a classifier row on a handskin dataset."""
-    from learn.breakdown import breakdown_markdown, group_markdown
-
-    if not r.get("by_active_taxels"):
-        return []
-    out = ["Accuracy by contact size (active taxels: pressure above the dataset's active "
-           "threshold):", "", *breakdown_markdown(r["by_active_taxels"]), ""]
-    if r.get("by_contactor"):
-        out += ["Accuracy by contactor (the dataset's `contactor` kind and type), least accurate "
-                "first:", "", *group_markdown(r["by_contactor"]), ""]
-    return out
-
-
-def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:
-    """The markdown report: our rows next to the paper's Tables 3 and 8 ("paper" columns;
-    "unknown" where we do not know the paper's value), then per-model details."""
-    lines = ["# handskin evaluation", "", header, "",
-             "Columns marked *paper* are Albini & Cannata (IJRR 2020); ours are on the test split "
-             "named above. Timing: median of 100 runs after 20 warm-up runs.", "",
-             *_table3(rows), "", *_table8(rows), "", "## Details", ""]  # fmt: skip
-    for r, label in zip(rows, row_labels(rows), strict=True):
-        lines += _details(r, label)
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return Path(path)

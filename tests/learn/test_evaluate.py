@@ -20,13 +20,13 @@ from learn.classical import (
     train_classical,
 )
 from learn.config import VggSvmConfig
+from learn.eval_report import write_report
 from learn.evaluate import (
     confusion_markdown,
     evaluate_checkpoint,
     evaluate_tensors,
     fast_inference,
     plot_history,
-    write_report,
 )
 from learn.experiments import paper
 from learn.folder import TensorData

@@ -10,7 +10,8 @@ import shutil
 import h5py
 import numpy as np
 
-from learn.evaluate import evaluate_checkpoint, write_report
+from learn.eval_report import write_report
+from learn.evaluate import evaluate_checkpoint
 from learn.leakage import shared_groups
 from tactile.dataset.reader import DatasetReader
 
