@@ -114,39 +114,40 @@ class Variant:
         return f"{NAMES[self.arch]}{width} {self.size[0]}×{self.size[1]}{tag}"
 
 
+def given_variant(checkpoint: str | Path, tag: str | None = None) -> Variant:
+    """The variant of a checkpoint used as is: its architecture, width and input size."""
+    from learn.checkpoint import load_checkpoint
+    from learn.train import run_from_dict
+
+    model = run_from_dict(load_checkpoint(checkpoint)["config"]).model
+    width = None if model.arch == "handsnet" else model.width
+    return Variant(model.arch, tuple(model.input_size), width, checkpoint=Path(checkpoint),
+                   tag=tag)  # fmt: skip
+
+
 def main_variant(checkpoint: Path | None, arch: str, width: float | None) -> Variant:
     """The main model: a given checkpoint's architecture, width and size (of ``arch``'s task),
     or ``arch`` at ``width`` and 68 × 100 px."""
     if checkpoint is None:
         return Variant(arch, NET_SIZE, width)
-    from learn.checkpoint import load_checkpoint
-    from learn.train import run_from_dict
-
-    model = run_from_dict(load_checkpoint(checkpoint)["config"]).model
-    if TASK[model.arch] != TASK[arch]:
+    v = given_variant(checkpoint)
+    if v.task != TASK[arch]:
         option = "--classifier" if TASK[arch] == "classify" else "--segmenter"
-        raise ConfigError(f"{option} {checkpoint} is a {model.arch} checkpoint; give a "
+        raise ConfigError(f"{option} {checkpoint} is a {v.arch} checkpoint; give a "
                           f"{'classifier' if TASK[arch] == 'classify' else 'segmenter'}")
-    width = None if model.arch == "handsnet" else model.width
-    return Variant(model.arch, tuple(model.input_size), width, checkpoint=Path(checkpoint))
+    return v
 
 
 def also_variants(paths: list[Path], segment: bool) -> list[Variant]:
     """Variants of ``--also`` checkpoints (any architecture), used as they are and named after
-    their run folders; ConfigError for a missing file or a segmenter when segmentation is off."""
-    from learn.checkpoint import load_checkpoint
-    from learn.train import run_from_dict
-
-    out = []
-    for path in map(Path, paths):
-        model = run_from_dict(load_checkpoint(path)["config"]).model
-        if TASK[model.arch] == "segment" and not segment:
-            raise ConfigError(f"--also {path} is a {model.arch} checkpoint, but segmentation is "
-                              "off (--no-segmentation, or the dataset has no label images). "
+    their run folders. DataError for a missing file; ConfigError for a segmenter when
+    segmentation is off, or two that would share a name."""
+    out = [given_variant(p, Path(p).parent.name or Path(p).stem) for p in paths]
+    for v in out:
+        if v.task == "segment" and not segment:
+            raise ConfigError(f"--also {v.checkpoint} is a {v.arch} checkpoint, but segmentation "
+                              "is off (--no-segmentation, or the dataset has no label images). "
                               "Fix: drop it or turn segmentation on")  # fmt: skip
-        width = None if model.arch == "handsnet" else model.width
-        tag = path.parent.name or path.stem
-        out.append(Variant(model.arch, tuple(model.input_size), width, checkpoint=path, tag=tag))
     if len({v.key for v in out}) < len(out):
         raise ConfigError("two --also checkpoints of one architecture, width and size share a "
                           "run folder name. Fix: give each its own folder")  # fmt: skip
