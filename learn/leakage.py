@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from learn.folder import is_dataset
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import DataError
 
@@ -57,7 +58,7 @@ def shared_groups(train_data: str | Path, test_data: str | Path) -> dict | None:
     shared ids and how many of the ``n_test`` test samples carry one.
     """
     a, b = _folder(train_data), _folder(test_data)
-    if not (a / "dataset.h5").is_file() or not (b / "dataset.h5").is_file():
+    if not is_dataset(a) or not is_dataset(b):
         return None
     if a.resolve() == b.resolve():
         return None
