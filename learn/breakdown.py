@@ -1,11 +1,14 @@
-"""Classification accuracy by contact size and by contactor: where a hand / non-hand
-classifier fails.
+"""Scores by contact size, contactor, action and hand parts in contact: where a hand /
+non-hand classifier or a hand-part segmenter fails.
 
 A touch that presses a handful of taxels carries little shape; the paper reports one accuracy
 over all images. ``handskin evaluate`` adds, for a handskin dataset, the accuracy of each true
 class within bins of the number of active taxels (pressure above the dataset's active
 threshold), and the accuracy on each kind of contactor (``kind: type`` from the dataset's
 ``contactor`` JSON, e.g. ``object: rake``), so a user sees which contacts cost the accuracy.
+For a segmenter it adds pixel accuracy and mIoU of each group of test images: by contactor
+(right or left hand), by the dataset's ``action`` and by how many hand parts touch (from the
+label image): finger identity is easy to see on a whole-hand print and not on three fingertips.
 """
 
 from __future__ import annotations
@@ -123,4 +126,61 @@ def group_markdown(rows: list[dict]) -> list[str]:
     lines = ["| contactor | samples | errors | accuracy % |", "|---|---|---|---|"]
     lines += [f"| {r['group']} | {r['n']} | {r['errors']} | {100 * r['accuracy']:.1f} |"
               for r in rows]  # fmt: skip
+    return lines
+
+
+def segmentation_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[str],
+                          num_classes: int, by_name: bool = False) -> list[dict[str, object]]:
+    """Per group: samples, pixel accuracy and mIoU (fractions) of the group's pooled confusion
+    matrix (Long et al.; classes absent from the group's ground truth skipped), lowest mIoU
+    first (``by_name``: in the groups' sorted order).
+
+    pred, truth : (S, h, w) int class ids; groups : (S,) str group of each image.
+    """
+    import torch
+
+    from learn import metrics as M
+
+    groups = np.asarray(groups)
+    if not len(pred) == len(truth) == len(groups):
+        raise ValueError(f"pred, truth and groups differ in length: "
+                         f"{len(pred)}, {len(truth)}, {len(groups)}")  # fmt: skip
+    rows = []
+    for g in np.unique(groups):
+        m = torch.from_numpy(np.flatnonzero(groups == g))
+        cm = M.confusion_matrix(torch.as_tensor(truth)[m], torch.as_tensor(pred)[m], num_classes)
+        rows.append({"group": str(g), "n": len(m), "pixel_accuracy": M.accuracy(cm),
+                     "mean_iou": M.mean_iou(cm)})  # fmt: skip
+    return rows if by_name else sorted(rows, key=lambda r: (r["mean_iou"], r["group"]))
+
+
+def parts_in_contact(truth: np.ndarray, num_classes: int) -> np.ndarray:
+    """(S,) int: how many of classes 1 .. num_classes - 1 (hand parts) each label image of
+    ``truth`` (S, h, w) holds."""
+    flat = np.asarray(truth).reshape(len(truth), -1)
+    return np.stack([(flat == c).any(1) for c in range(1, num_classes)], 1).sum(1)
+
+
+def action_names(data_path: str | Path, indices: np.ndarray) -> list[str]:
+    """The ``action`` name (from ``attrs["actions"]``) of samples ``indices`` (S,) of a handskin
+    dataset; ``"none"`` for -1 and ``"unknown"`` when the field or the names are missing."""
+    from tactile.dataset.reader import DatasetReader
+
+    with DatasetReader(data_path) as reader:
+        names = list(reader.attrs.get("actions", []))
+        if "action" not in reader.fields or not names:
+            return ["unknown"] * len(indices)
+        order = np.argsort(indices)
+        raw = reader["action"][np.asarray(indices)[order]]
+    out = [""] * len(indices)
+    for pos, a in zip(order, raw, strict=True):
+        out[pos] = "none" if a < 0 else names[a] if a < len(names) else "unknown"
+    return out
+
+
+def segmentation_group_markdown(rows: list[dict], title: str) -> list[str]:
+    """A markdown table of :func:`segmentation_by_group` (scores in %), first column ``title``."""
+    lines = [f"| {title} | images | pixel accuracy % | mIoU % |", "|---|---|---|---|"]
+    lines += [f"| {r['group']} | {r['n']} | {100 * r['pixel_accuracy']:.1f} | "
+              f"{100 * r['mean_iou']:.1f} |" for r in rows]  # fmt: skip
     return lines

@@ -136,7 +136,7 @@ def _details(r: dict, label: str) -> list[str]:
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
             confusion_markdown(torch.tensor(r["cm"]), names), "",
-            *_by_size(r), *_merged(r)]  # fmt: skip
+            *_by_size(r), *_merged(r), *_seg_groups(r)]  # fmt: skip
 
 
 #: Class groups of the 7-class hand-part segmentation the report also scores, (title, groups).
@@ -160,6 +160,20 @@ def _merged(r: dict) -> list[str]:
     for title, groups in MERGED_VIEWS:
         lines.append(f"- {title}: {_fmt(M.mean_iou(M.merge_classes(r['cm'], groups)), 100)}")
     return [*lines, ""]
+
+
+def _seg_groups(r: dict) -> list[str]:
+    """A segmenter row's scores by contactor, action and hand parts touching (handskin data)."""
+    from learn.breakdown import segmentation_group_markdown
+
+    groups = r.get("segmentation_by_group")
+    if not groups:
+        return []
+    out = ["Scores by group of test images (each group's pooled confusion matrix; contactor and "
+           "action lowest mIoU first):", ""]  # fmt: skip
+    for title, rows in groups.items():
+        out += [*segmentation_group_markdown(rows, title), ""]
+    return out
 
 
 def _by_size(r: dict) -> list[str]:

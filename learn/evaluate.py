@@ -219,8 +219,11 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     from learn.breakdown import (
         accuracy_by_active_taxels,
         accuracy_by_group,
+        action_names,
         active_taxel_counts,
         contactor_types,
+        parts_in_contact,
+        segmentation_by_group,
     )
     from learn.checkpoint import load_checkpoint, model_from_checkpoint
     from learn.folder import is_dataset, materialize, open_split
@@ -237,9 +240,10 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                        run.train.seed)  # fmt: skip
     test = materialize(split, "test")
     n_cls = run.model.num_classes
-    classify_data = run.task == "classify" and is_dataset(data_path)
-    ref = evaluate_tensors(model, test, n_cls, keep_predictions=classify_data)
-    by_size = by_contactor = None
+    on_dataset = is_dataset(data_path)
+    classify_data = run.task == "classify" and on_dataset
+    ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
+    by_size = by_contactor = seg_groups = None
     if classify_data:  # accuracy by contact size and by contactor
         pred = ref.predictions.numpy()
         names = list(ckpt.get("class_names") or [str(c) for c in range(n_cls)])
@@ -247,6 +251,14 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                                             active_taxel_counts(data_path, split.indices), names)
         by_contactor = accuracy_by_group(pred, test.y.numpy(),
                                          contactor_types(data_path, split.indices))
+    elif on_dataset:  # segmentation scores by contactor, action and hand parts touching
+        pred, y = ref.predictions.numpy(), test.y.numpy()
+        parts = [str(k) for k in parts_in_contact(y, n_cls)]
+        seg_groups = {
+            "contactor": segmentation_by_group(pred, y, contactor_types(data_path, split.indices),
+                                               n_cls),
+            "action": segmentation_by_group(pred, y, action_names(data_path, split.indices), n_cls),
+            "hand parts touching": segmentation_by_group(pred, y, parts, n_cls, by_name=True)}
     fast = fast_inference(model, check=test.x[:64])
     res = evaluate_tensors(fast, test, n_cls)
     if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
@@ -266,7 +278,8 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
             "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
             "init": ckpt.get("init"),
             "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
-            "by_active_taxels": by_size, "by_contactor": by_contactor}  # fmt: skip
+            "by_active_taxels": by_size, "by_contactor": by_contactor,
+            "segmentation_by_group": seg_groups}  # fmt: skip
 
 
 def shared_with_training(train_data: dict | None, data_path: str | Path) -> dict | None:

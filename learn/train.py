@@ -7,7 +7,8 @@
 Images of the training split are read once (``learn.data`` / ``learn.folder``, resized to
 ``run.model.input_size``) and kept as ``(S, 1, h, w)`` float32 tensors; every epoch draws a
 seeded permutation of the ``3 S`` (sample, view) pairs — the paper's threefold augmentation:
-original, horizontal flip, vertical flip — and ``get_batch`` gathers and flips them. Epoch ``e``
+original, horizontal flip, vertical flip; ``rot180`` adds both flips, a 180-degree turn, as a
+fourth view — and ``get_batch`` gathers and flips them. Epoch ``e``
 reseeds torch from ``(seed, e)``, so a resumed run equals an uninterrupted one on CPU.
 """
 
@@ -55,6 +56,9 @@ class RunConfig:
     val_fraction: float = 0.15  # share of the train split's subjects/instances held out
     patience_epochs: int = 0  # early stopping after this many epochs without a better val metric
     flips: bool = True  # the paper's threefold augmentation (False: originals only)
+    # one more view, both flips: a 180-degree turn. A single flip mirrors a print, so a right
+    # hand looks like a left one with the same part labels; the turn keeps its chirality.
+    rot180: bool = False
     threads: int = 2  # torch CPU threads (the project's machines have 2 shared cores)
     eval_batch_size: int = 64  # images per evaluation forward pass
 
@@ -94,18 +98,27 @@ def epoch_seed(seed: int, epoch: int) -> int:
 
 
 def flip_views(x: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
-    """Apply view 1 (columns reversed) / 2 (rows reversed) per item of ``x`` (B, ..., H, W)."""
+    """Apply view 1 (columns reversed) / 2 (rows reversed) / 3 (both: a 180-degree turn) per
+    item of ``x`` (B, ..., H, W); view 0 leaves an item as it is."""
     x = x.clone()
-    for view, dim in ((1, -1), (2, -2)):
+    for view, dims in ((1, (-1,)), (2, (-2,)), (3, (-2, -1))):
         sel = views == view
         if sel.any():
-            x[sel] = x[sel].flip(dim)
+            x[sel] = x[sel].flip(dims)
     return x
 
 
-def get_batch(data: TensorData, items: torch.Tensor, n_views: int) -> tuple[torch.Tensor, ...]:
-    """Images (B, 1, h, w) and targets (B,) or (B, h, w) of items ``sample * n_views + view``."""
-    sample, view = items // n_views, items % n_views
+def views_of(run: RunConfig) -> torch.Tensor:
+    """(V,) int64 ids (`flip_views`) of the views each training sample is shown in: 0; 1 and 2
+    with ``run.flips`` (the paper's three); 3 with ``run.rot180``."""
+    return torch.tensor([0, *((1, 2) if run.flips else ()), *((3,) if run.rot180 else ())])
+
+
+def get_batch(data: TensorData, items: torch.Tensor,
+              views: torch.Tensor) -> tuple[torch.Tensor, ...]:  # fmt: skip
+    """Images (B, 1, h, w) and targets (B,) or (B, h, w) of items ``sample * V + k``: sample
+    ``sample`` in view ``views[k]`` (``views`` (V,) from `views_of`)."""
+    sample, view = items // len(views), views[items % len(views)]
     x, y = data.x[sample], data.y[sample]
     return flip_views(x, view), (flip_views(y, view) if y.ndim == 3 else y)
 
@@ -122,13 +135,13 @@ def make_loss(run: RunConfig, train: TensorData) -> nn.Module:
 def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool):
     """One epoch over a seeded permutation of (sample, view) pairs; returns the mean loss."""
     torch.manual_seed(epoch_seed(run.train.seed, epoch))
-    n_views = N_VIEWS if run.flips else 1
-    order = torch.randperm(len(data.y) * n_views)
+    views = views_of(run)
+    order = torch.randperm(len(data.y) * len(views))
     model.train()
     total, bar = 0.0, tqdm(range(0, len(order), run.train.batch_size), disable=not progress,
                            desc=f"epoch {epoch + 1}/{run.train.epochs}", leave=False)  # fmt: skip
     for start in bar:
-        x, y = get_batch(data, order[start : start + run.train.batch_size], n_views)
+        x, y = get_batch(data, order[start : start + run.train.batch_size], views)
         value = train_step(model, loss_fn, optimizer, x, y, run.task)
         total += value * len(y)
         bar.set_postfix(loss=f"{value:.4f}")

@@ -45,24 +45,24 @@ def train_budgeted(run, train, budget_s: float, max_steps: float, init_from=None
     import torch
     from tqdm.auto import tqdm
 
-    from learn.train import N_VIEWS, build, get_batch, make_loss, train_step
+    from learn.train import build, get_batch, make_loss, train_step, views_of
 
     torch.set_num_threads(run.threads)
     model, optimizer, _ = build(run, init_from)
-    loss_fn, n_views = make_loss(run, train), N_VIEWS if run.flips else 1
+    loss_fn, views = make_loss(run, train), views_of(run)
     steps, images, t0 = 0, 0, time.perf_counter()
     bar = tqdm(total=round(budget_s), disable=not progress, leave=False, unit="s",
                desc=f"{run.model.arch} {run.model.input_size}")  # fmt: skip
     model.train()
-    for items in batches(run, len(train.y) * n_views):
+    for items in batches(run, len(train.y) * len(views)):
         if steps >= max_steps or time.perf_counter() - t0 >= budget_s:
             break
-        x, y = get_batch(train, items, n_views)
+        x, y = get_batch(train, items, views)
         train_step(model, loss_fn, optimizer, x, y, run.task)
         steps, images = steps + 1, images + len(y)
         bar.update(min(round(time.perf_counter() - t0), bar.total) - bar.n)
     bar.close()
-    info = {"steps": steps, "images": images, "epochs": images / (len(train.y) * n_views),
+    info = {"steps": steps, "images": images, "epochs": images / (len(train.y) * len(views)),
             "minutes": (time.perf_counter() - t0) / 60}  # fmt: skip
     return model.eval(), info
 

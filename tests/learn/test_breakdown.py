@@ -1,4 +1,5 @@
-"""Accuracy by contact size against counts made by hand."""
+"""Accuracy by contact size and contactor against counts made by hand; segmentation scores by
+group against a pixel-loop reference of Long et al.'s IoU."""
 
 from __future__ import annotations
 
@@ -10,7 +11,25 @@ from learn.breakdown import (
     accuracy_by_group,
     breakdown_markdown,
     group_markdown,
+    parts_in_contact,
+    segmentation_by_group,
+    segmentation_group_markdown,
 )
+
+
+def _reference_scores(pred: np.ndarray, truth: np.ndarray, k: int) -> tuple[float, float]:
+    """Pixel accuracy and mIoU by counting pixels one by one (no confusion matrix): IoU of
+    class c = |pred = c and truth = c| / |pred = c or truth = c| over classes in the truth."""
+    p, t = pred.ravel().tolist(), truth.ravel().tolist()
+    right = sum(a == b for a, b in zip(p, t, strict=True))
+    ious = []
+    for c in range(k):
+        if c not in t:
+            continue
+        inter = sum(a == c and b == c for a, b in zip(p, t, strict=True))
+        union = sum(a == c or b == c for a, b in zip(p, t, strict=True))
+        ious.append(inter / union)
+    return right / len(t), sum(ious) / len(ious)
 
 
 def test_bins_and_per_class_accuracy_by_hand():
@@ -49,3 +68,37 @@ def test_accuracy_by_contactor_by_hand_least_accurate_first():
     assert "| object: rake | 3 | 2 | 33.3 |" in "\n".join(group_markdown(rows))
     with pytest.raises(ValueError, match="length"):
         accuracy_by_group(pred, truth, groups[:2])
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_segmentation_by_group_against_pixel_counts(seed):
+    """Random label images, some classes absent from a group: each group's scores equal the
+    pixel-loop reference on that group's images alone."""
+    rng = np.random.default_rng(seed)
+    k, n = 7, 9
+    truth = rng.integers(0, k, (n, 5, 6))
+    truth[truth == 3] = 0  # class 3 never in the truth: skipped in every mean
+    pred = np.where(rng.random(truth.shape) < 0.6, truth, rng.integers(0, k, truth.shape))
+    groups = rng.choice(["hand: left_hand", "hand: right_hand", "action: grasp"], n)
+    groups[:3] = ["hand: left_hand", "hand: right_hand", "action: grasp"]
+    rows = segmentation_by_group(pred, truth, groups, k)
+    assert [r["mean_iou"] for r in rows] == sorted(r["mean_iou"] for r in rows)
+    for r in rows:
+        m = groups == r["group"]
+        acc, miou = _reference_scores(pred[m], truth[m], k)
+        assert r["n"] == m.sum()
+        assert r["pixel_accuracy"] == pytest.approx(acc) and r["mean_iou"] == pytest.approx(miou)
+    named = segmentation_by_group(pred, truth, groups, k, by_name=True)
+    assert [r["group"] for r in named] == sorted(set(groups))
+    text = "\n".join(segmentation_group_markdown(rows, "contactor"))
+    r = rows[0]
+    assert f"| {r['group']} | {r['n']} | {100 * r['pixel_accuracy']:.1f} |" in text
+    with pytest.raises(ValueError, match="length"):
+        segmentation_by_group(pred, truth, groups[:2], k)
+
+
+def test_parts_in_contact_counts_hand_classes_only():
+    truth = np.zeros((3, 4, 4), np.uint8)
+    truth[1, 0, :3] = [1, 6, 6]  # thumb and palm
+    truth[2] = np.arange(16).reshape(4, 4) % 7  # every class
+    assert parts_in_contact(truth, 7).tolist() == [0, 2, 6]

@@ -116,6 +116,14 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     cm = np.asarray(clf["cm"])
     assert groups[0]["errors"] == cm.sum() - np.trace(cm)
     assert seg["by_active_taxels"] is None and seg["by_contactor"] is None
+    # the segmenter's groups: every test image in one group per grouping, and the hand-parts
+    # groups re-add to the whole test split's pixel count
+    by = seg["segmentation_by_group"]
+    assert set(by) == {"contactor", "action", "hand parts touching"}
+    assert all(sum(r["n"] for r in rows) == seg["n_test"] for rows in by.values())
+    assert [r["group"] for r in by["action"]] == ["unknown"]  # the tiny set stores no action
+    assert by["action"][0]["mean_iou"] == pytest.approx(seg["metrics"]["mean_iou"])
+    assert "| hand parts touching | images | pixel accuracy % | mIoU % |" in text
 
 
 def test_report_tells_models_of_one_method_apart(checkpoints, tiny_dataset, tmp_path):

@@ -12,14 +12,16 @@ from learn.config import FINETUNE_TEST_C
 from learn.crossval import cross_validate, folds, parse_grid
 from learn.data import TorchTactileDataset
 from learn.evaluate import evaluate_tensors
-from learn.folder import group_ids, validation_split
+from learn.folder import TensorData, group_ids, validation_split
 from learn.train import (
     RunConfig,
     fit,
+    get_batch,
     load_data,
     load_run_config,
     replace_train,
     run_from_dict,
+    views_of,
 )
 from tactile.config import to_dict
 from tactile.dataset import open_dataset
@@ -112,6 +114,28 @@ def test_finetuning_applies_lr_factors(tiny_dataset, tiny_run, checkpoints):
     assert torch.equal(first["w"], conv0)  # epoch 0 starts from the checkpoint's weights
 
 
+@pytest.mark.parametrize(("flips", "rot180", "expected"), [
+    (True, False, [0, 1, 2]), (False, False, [0]), (True, True, [0, 1, 2, 3]),
+    (False, True, [0, 3])])  # fmt: skip
+def test_training_views_against_numpy(flips, rot180, expected):
+    """Item j of an epoch is sample j // V in view views[j % V]: as is, columns reversed, rows
+    reversed, or turned by 180 degrees (numpy's rot90 twice), for images and label images."""
+    rng = np.random.default_rng(0)
+    x, y = rng.random((5, 1, 4, 6)), rng.integers(0, 7, (5, 4, 6))
+    data = TensorData(torch.from_numpy(x), torch.from_numpy(y))
+    run = RunConfig(flips=flips, rot180=rot180)
+    views = views_of(run)
+    assert views.tolist() == expected
+    items = torch.arange(5 * len(views))
+    xb, yb = get_batch(data, items, views)
+    ref = {0: lambda a: a, 1: lambda a: a[..., ::-1], 2: lambda a: a[..., ::-1, :],
+           3: lambda a: np.rot90(a, 2, axes=(-2, -1))}  # fmt: skip
+    for j in range(len(items)):
+        s, v = divmod(j, len(views))
+        np.testing.assert_array_equal(xb[j].numpy(), ref[expected[v]](x[s]))
+        np.testing.assert_array_equal(yb[j].numpy(), ref[expected[v]](y[s]))
+
+
 def test_run_config_toml(tmp_path):
     path = tmp_path / "run.toml"
     path.write_text('val_fraction = 0.2\n[model]\narch = "handsnet"\ninput_size = [32, 48]\n'
@@ -119,6 +143,9 @@ def test_run_config_toml(tmp_path):
     run = load_run_config(path)
     assert run.val_fraction == 0.2 and run.model.input_size == (32, 48)
     assert run.train.lr == 0.05 and dict(run.train.lr_factors) == {"first_two_convs": 0.1}
+    assert not run.rot180
+    path.write_text("rot180 = true\n")
+    assert load_run_config(path).rot180
     path.write_text("[train]\nlearning_rate = 0.1\n")
     with pytest.raises(ConfigError, match="learning_rate"):
         load_run_config(path)
