@@ -145,10 +145,10 @@ def segmentation_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[
     if not len(pred) == len(truth) == len(groups):
         raise ValueError(f"pred, truth and groups differ in length: "
                          f"{len(pred)}, {len(truth)}, {len(groups)}")  # fmt: skip
-    rows = []
+    pred, truth, rows = torch.as_tensor(pred), torch.as_tensor(truth), []
     for g in np.unique(groups):
         m = torch.from_numpy(np.flatnonzero(groups == g))
-        cm = M.confusion_matrix(torch.as_tensor(truth)[m], torch.as_tensor(pred)[m], num_classes)
+        cm = M.confusion_matrix(truth[m], pred[m], num_classes)
         rows.append({"group": str(g), "n": len(m), "pixel_accuracy": M.accuracy(cm),
                      "mean_iou": M.mean_iou(cm)})  # fmt: skip
     return rows if by_name else sorted(rows, key=lambda r: (r["mean_iou"], r["group"]))
