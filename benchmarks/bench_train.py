@@ -2,11 +2,12 @@
 
     python benchmarks/bench_train.py [--images 320] [--threads 2] [--train-images 2113]
 
-Times one epoch of each preset's real training loop (``learn.train.train_epoch``: the paper's
-flips, the preset's loss and optimizer) over ``--images`` random images of the preset's input
-size, after a short warm-up epoch, and extrapolates to one epoch of ``3 x
---train-images`` views (2,113 = the train part of the paper-sized forearm set after its
-validation share; segmenters see only its ~1,010 hand images) and to the preset's epochs.
+Times one epoch of each preset's real training loop (``learn.train.train_epoch``: the
+preset's views — the paper's flips —, loss and optimizer) over ``--images`` random images of
+the preset's input size, after a short warm-up epoch, and extrapolates to one epoch of
+``--train-images`` samples in each view (``learn.train.views_of``: 3 by default; 2,113 = the
+train part of the paper-sized forearm set after its validation share; segmenters see only its
+~1,010 hand images) and to the preset's epochs.
 The learning issue's target: the default HandsNet trains in under 20 minutes on 2 cores.
 Printed, never asserted.
 """
@@ -20,15 +21,15 @@ import torch
 
 from learn.experiments.models import preset_run
 from learn.folder import TensorData
-from learn.train import N_VIEWS, build, make_loss, train_epoch
+from learn.train import build, make_loss, train_epoch, views_of
 
 HAND_SHARE = 1710 / 3530  # segmenters train on hand samples only (paper's class balance)
 
 
 def images_per_second(arch: str, n: int, threads: int) -> tuple[float, object]:
     """Training images per second of ``arch``'s preset: one ``learn.train.train_epoch`` (the
-    real step: flips, loss, optimizer) over ``n`` random sparse images x 3 views, after a
-    warm-up epoch over 64 of them; also returns the run config."""
+    real step: views, loss, optimizer) over ``n`` random sparse images in each of the preset's
+    views, after a warm-up epoch over 64 of them; also returns the run config."""
     torch.set_num_threads(threads)
     run = preset_run(arch)
     h, w = run.model.input_size
@@ -42,21 +43,22 @@ def images_per_second(arch: str, n: int, threads: int) -> tuple[float, object]:
     train_epoch(model, TensorData(x[:64], y[:64]), loss_fn, optimizer, run, 0, False)
     tic = time.perf_counter()
     train_epoch(model, data, loss_fn, optimizer, run, 1, False)
-    return n * N_VIEWS / (time.perf_counter() - tic), run
+    return n * len(views_of(run)) / (time.perf_counter() - tic), run
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--images", type=int, default=320, help="timed samples, x 3 views (count)")
+    parser.add_argument("--images", type=int, default=320,
+                        help="timed samples, each in every view (count)")  # fmt: skip
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads (count)")
     parser.add_argument("--train-images", type=int, default=2113, help="train samples (count)")
     parser.add_argument("--archs", nargs="+", default=["handsnet", "segnet", "fcn16s"])
     args = parser.parse_args()
-    print(f"threads {args.threads}, {args.train_images} train samples x {N_VIEWS} views")
+    print(f"threads {args.threads}, {args.train_images} train samples, each in every view")
     for arch in args.archs:
         rate, run = images_per_second(arch, args.images, args.threads)
         share = 1.0 if run.task == "classify" else HAND_SHARE
-        epoch_s = args.train_images * share * N_VIEWS / rate
+        epoch_s = args.train_images * share * len(views_of(run)) / rate
         total_min = epoch_s * run.train.epochs / 60
         note = " (target < 20 min)" if arch == "handsnet" else ""
         print(f"{arch:9s} {rate:7.1f} img/s  {epoch_s:6.1f} s/epoch  "

@@ -5,10 +5,11 @@
 
 Every row of the given report JSON files (``handskin evaluate --report X.md`` writes ``X.json``)
 becomes a point: accuracy (classifiers) or mean IoU (segmenters) in % against the training
-samples its checkpoint records (``train_data.n_train``), one line per method, with the paper's
-published score as a dashed line. Each report scores its models on its own dataset's held-out
-test split, so points of different datasets come from different test subjects; a row whose
-scores are not held out (``shared_with_training``) is refused.
+samples its checkpoint records (``train_data.n_train``), one line per method and width (dotted
+with test-time flips), with the paper's published score as a dashed line. Each report scores
+its models on its own dataset's held-out test split, so points of different datasets come from
+different test subjects; a row whose scores are not held out (``shared_with_training``) is
+refused.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import matplotlib.ticker
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from learn.eval_report import TTA_SUFFIX
 from learn.evaluate import ARCH_LABEL
 from learn.experiments import paper
 
@@ -45,24 +47,37 @@ def points(paths: list[Path]) -> dict[str, dict[str, list[tuple[int, float, str]
             if data.get("n_train") is None:
                 raise SystemExit(f"{path}: {row['checkpoint']} does not record its training data")
             key = {task: metric for task, metric, _, _ in TASKS}[row["task"]]
-            out[row["task"]][ARCH_LABEL.get(row["arch"], row["arch"])].append(
+            out[row["task"]][method_of(row)].append(
                 (int(data["n_train"]), 100 * row["metrics"][key], Path(data["path"]).name))
     return out
+
+
+def method_of(row: dict) -> str:
+    """A row's line: the method's name, its width multiplier when it has one, and whether it
+    was scored with test-time flips (``handskin evaluate --tta``)."""
+    model = (row.get("config") or {}).get("model") or {}
+    width = "" if model.get("width") is None else f" w{model['width']:g}"
+    return ARCH_LABEL.get(row["arch"], row["arch"]) + width + (
+        TTA_SUFFIX if row.get("tta_views") else "")  # fmt: skip
 
 
 def chart(pts: dict, png: Path) -> Path:
     """Two panels (classification, segmentation), score against training samples."""
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, (task, _, ylabel, title) in zip(axes, TASKS, strict=True):
+        drawn = set()  # methods whose paper line is drawn
         for method, rows in sorted(pts.get(task, {}).items()):
             rows = sorted(rows)
-            line = ax.plot([r[0] for r in rows], [r[1] for r in rows], "o-", label=method)[0]
+            style = "o:" if method.endswith(TTA_SUFFIX) else "o-"
+            line = ax.plot([r[0] for r in rows], [r[1] for r in rows], style, label=method)[0]
             for n, score, name in rows:
                 ax.annotate(f"{score:.1f} ({name})", (n, score), textcoords="offset points",
                             xytext=(4, -12), fontsize=7, color=line.get_color())  # fmt: skip
-            if method in PAPER:
-                ax.axhline(PAPER[method], ls="--", color=line.get_color(), lw=1,
-                           label=f"paper: {method} {PAPER[method]:.2f} %")  # fmt: skip
+            base = method.split(" ")[0]
+            if base in PAPER and base not in drawn:
+                drawn.add(base)
+                ax.axhline(PAPER[base], ls="--", color=line.get_color(), lw=1,
+                           label=f"paper: {base} {PAPER[base]:.2f} %")  # fmt: skip
         ns = [r[0] for rows in pts.get(task, {}).values() for r in rows]
         ax.set_xscale("log")
         if ns:

@@ -80,8 +80,9 @@ ArchOpt = _opt(str, "handsnet | vgg16 | segnet | fcn16s (its preset configuratio
 ConfigOpt = _opt(Path | None, "TOML run config: model and train tables and top-level "
                  "RunConfig keys, laid over the arch's preset (bovw / vgg_svm: top-level "
                  "BovwConfig / VggSvmConfig keys; bovw also input_size = [h, w] px).")
-EpochsOpt = _opt(int | None, "Epochs (each a pass over 3x the train images); vgg_svm without "
-                 "--init: epochs of the vgg16 trained first into OUT/vgg16.")
+EpochsOpt = _opt(int | None, "Epochs (each a pass over every train image in every view: 3 "
+                 "with flips); vgg_svm without --init: epochs of the vgg16 trained first into "
+                 "OUT/vgg16.")
 BatchOpt = _opt(int | None, "Images per optimisation step.")
 LrOpt = _opt(float | None, "Initial learning rate (dimensionless, per step).")
 SeedOpt = _opt(int | None, "Seed of init, shuffling and splits (integer).")
@@ -181,6 +182,9 @@ EvalDataOpt = _opt(Path, "Dataset folder or image folder (its test split is used
 ReportOpt = _opt(Path, "Markdown report to write (.md file; a .json beside it).")
 ThreadsOpt = _opt(int, "CPU threads used for the timing (count).")
 EvalHandOpt = _opt(str | None, "Image folders: hand folder names (default: the checkpoint's).")
+EvalTtaOpt = _opt(bool, "Also score each network (.pt) with test-time flips, in a row of its "
+                  "own: the mean softmax over the views it was trained on (original, columns "
+                  "and rows reversed), about 3x the ms per image.", "--tta")
 
 
 def evaluate_command(
@@ -189,19 +193,27 @@ def evaluate_command(
     report: ReportOpt = Path("report.md"),
     threads: ThreadsOpt = 1,
     hand_classes: EvalHandOpt = None,
+    tta: EvalTtaOpt = False,
 ) -> None:
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
-    from learn.checkpoint import load_checkpoint, versions
+    from learn.checkpoint import load_checkpoint, model_from_checkpoint, versions
     from learn.classical import load_npz
     from learn.eval_report import write_report
-    from learn.evaluate import evaluate_checkpoint
+    from learn.evaluate import evaluate_checkpoint, tta_views
 
     try:
         _check_data(data)
+        jobs = []  # (checkpoint, with test-time flips)
         for c in checkpoints:
-            load_npz(c) if c.suffix == ".npz" else load_checkpoint(c)
+            if c.suffix == ".npz":
+                load_npz(c)
+            elif tta:  # a network trained without flips fails here, before any work
+                tta_views(model_from_checkpoint(load_checkpoint(c))[1], c)
+            else:
+                load_checkpoint(c)
+            jobs += [(c, False)] + ([(c, True)] if tta and c.suffix != ".npz" else [])
         rows = [evaluate_checkpoint(c, data, hand_classes=_hand_classes(hand_classes),
-                                    threads=threads) for c in checkpoints]  # fmt: skip
+                                    threads=threads, tta=t) for c, t in jobs]  # fmt: skip
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     from learn.leakage import leakage_note
@@ -233,6 +245,8 @@ LabelsOpt = _opt(Path | None, "Write the per-taxel predicted class ids here (.np
 StepOpt = _opt(float, "Grid step of the map built from a layout file, mm/pixel.")
 ThresholdOpt = _opt(float | None, "Per-part counts and means take taxels above this pressure, "
                     "Pa (default: the dataset's active-taxel threshold for --data, else 0).")
+PredTtaOpt = _opt(bool, "Test-time flips: each network's mean softmax over the views it was "
+                  "trained on (original, columns and rows reversed); about 3x the time.", "--tta")
 
 
 def predict_command(
@@ -247,6 +261,7 @@ def predict_command(
     save_labels: LabelsOpt = None,
     step_mm: StepOpt = 1.0,
     threshold_pa: ThresholdOpt = None,
+    tta: PredTtaOpt = False,
 ) -> None:
     """Class + probability, segmentation, per-taxel labels, per-part taxel count and mean
     pressure; the Figs. 12-13 and Fig. 18 pictures; the per-taxel labels for handskin view."""
@@ -261,8 +276,8 @@ def predict_command(
         sample = None if data is None else P.read_sample(data, index)
         if sample is not None and threshold_pa is not None:
             sample = dataclasses.replace(sample, threshold_pa=threshold_pa)
-        clf = None if classifier is None else P.load_predictor(classifier)
-        seg = None if segmenter is None else P.load_predictor(segmenter)
+        clf = None if classifier is None else P.load_predictor(classifier, tta)
+        seg = None if segmenter is None else P.load_predictor(segmenter, tta)
         pred = _predict(P, image, frame, map_, sample, clf, seg, step_mm, threshold_pa or 0.0)
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err

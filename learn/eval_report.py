@@ -55,10 +55,16 @@ def _init_text(r: dict) -> str:
             else f" Initialisation: the weights of `{init}`.")  # fmt: skip
 
 
+#: Label suffix of a row scored with test-time flips (``learn.tta``).
+TTA_SUFFIX = " + test-time flips"
+
+
 def row_labels(rows: list[dict]) -> list[str]:
-    """Table labels of report rows: the method's name (``ARCH_LABEL``), with the training data
-    and then the run folder added where two rows would otherwise share a label."""
-    labels = [ARCH_LABEL.get(r["arch"], r["arch"]) for r in rows]
+    """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
+    test-time flips), with the training data and then the run folder added where two rows would
+    otherwise share a label."""
+    labels = [ARCH_LABEL.get(r["arch"], r["arch"]) + (TTA_SUFFIX if r.get("tta_views") else "")
+              for r in rows]  # fmt: skip
     for extra in (_data_name, lambda r: Path(r["checkpoint"]).parent.name):
         dup = {lab for lab in labels if labels.count(lab) > 1}
         labels = [f"{lab}, {extra(r)}" if lab in dup else lab
@@ -132,11 +138,21 @@ def _details(r: dict, label: str) -> list[str]:
             f"({epoch}seed {r['seed']}, {r['n_test']} test images)", "",
             f"Trained on: {trained_on(r)}.{_init_text(r)}", "",
             *([note, ""] if (note := leakage_note(r.get("shared_with_training"))) else []),
-            f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "",
+            f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "", *_tta_text(r),
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
             confusion_markdown(torch.tensor(r["cm"]), names), "",
             *_by_size(r), *_merged(r), *_seg_groups(r)]  # fmt: skip
+
+
+def _tta_text(r: dict) -> list[str]:
+    """The sentence on test-time flips of a row scored with them (its scores and times)."""
+    views = r.get("tta_views")
+    if not views:
+        return []
+    return [f"Test-time flips: scores and times are of the mean softmax over views {views} "
+            "(`learn.tta.VIEW_DIMS`: 0 original, 1 columns reversed, 2 rows reversed, 3 both), "
+            f"run as one batch of {len(views)} images.", ""]  # fmt: skip
 
 
 #: Class groups of the 7-class hand-part segmentation the report also scores, (title, groups).

@@ -23,6 +23,8 @@ from learn import metrics as M
 from learn.experiments import paper
 from learn.inputs import unpressed_as_background
 from learn.models import prepare_for_inference
+from learn.tta import FlipTTA
+from tactile.errors import ConfigError
 
 CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
 
@@ -212,10 +214,11 @@ SEG_KEYS = ("pixel_accuracy", "mean_accuracy", "mean_iou", "fw_iou")
 
 def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                         hand_classes: tuple[str, ...] | None = None, threads: int = 1,
-                        time_runs: int = 100) -> dict:  # fmt: skip
+                        time_runs: int = 100, tta: bool = False) -> dict:  # fmt: skip
     """Test-split metrics (float and fast path) and CPU ms/image (1 thread by default) of a
     checkpoint (a .pt file; a classical model.npz goes to ``learn.classical.evaluate_classical``);
-    a JSON-able dict (one row of the report)."""
+    a JSON-able dict (one row of the report). ``tta``: every path, timing included, runs with
+    test-time flips over the views the network was trained on (`learn.tta.FlipTTA`)."""
     from learn.breakdown import (
         accuracy_by_active_taxels,
         accuracy_by_group,
@@ -235,6 +238,8 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                                   threads=threads, time_runs=time_runs)  # fmt: skip
     ckpt = load_checkpoint(ckpt_path)
     model, run = model_from_checkpoint(ckpt)
+    views = tta_views(run, ckpt_path) if tta else None
+    wrap = (lambda m: FlipTTA(m, views)) if tta else (lambda m: m)
     hand = hand_classes or (ckpt.get("data") or {}).get("hand_classes")
     split = open_split(Path(data_path), "test", run.task, run.model.input_size, hand,
                        run.train.seed)  # fmt: skip
@@ -242,7 +247,7 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     n_cls = run.model.num_classes
     on_dataset = is_dataset(data_path)
     classify_data = run.task == "classify" and on_dataset
-    ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
+    ref = evaluate_tensors(wrap(model), test, n_cls, keep_predictions=on_dataset)
     by_size = by_contactor = seg_groups = None
     if classify_data:  # accuracy by contact size and by contactor
         pred = ref.predictions.numpy()
@@ -259,16 +264,16 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                                                n_cls),
             "action": segmentation_by_group(pred, y, action_names(data_path, split.indices), n_cls),
             "hand parts touching": segmentation_by_group(pred, y, parts, n_cls, by_name=True)}
-    fast = fast_inference(model, check=test.x[:64])
+    fast = wrap(fast_inference(model, check=test.x[:64]))
     res = evaluate_tensors(fast, test, n_cls)
     if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
-        fast = fast_inference(model, bf16=False)
+        fast = wrap(fast_inference(model, bf16=False))
         res = evaluate_tensors(fast, test, n_cls)
-    size = run.model.input_size
-    ms = {"eval_mode": cpu_ms_per_image(model, size, threads, time_runs),
-          "prepared": cpu_ms_per_image(prepare_for_inference(model), size, threads, time_runs),
+    size, prepared = run.model.input_size, wrap(prepare_for_inference(model))
+    ms = {"eval_mode": cpu_ms_per_image(wrap(model), size, threads, time_runs),
+          "prepared": cpu_ms_per_image(prepared, size, threads, time_runs),
           "fast": cpu_ms_per_image(fast, size, threads, time_runs),
-          "gpu": gpu_ms_per_image(model, size)}  # fmt: skip
+          "gpu": gpu_ms_per_image(wrap(model), size)}  # fmt: skip
     return {"checkpoint": str(ckpt_path), "arch": run.model.arch, "task": run.task,
             "epoch": ckpt["epoch"], "class_names": list(ckpt.get("class_names", [])),
             "n_test": len(test.y), "cm": ref.cm.tolist(), "metrics": ref.metrics,
@@ -279,7 +284,20 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
             "init": ckpt.get("init"),
             "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
             "by_active_taxels": by_size, "by_contactor": by_contactor,
-            "segmentation_by_group": seg_groups}  # fmt: skip
+            "segmentation_by_group": seg_groups, "tta_views": views}  # fmt: skip
+
+
+def tta_views(run, ckpt_path: str | Path) -> list[int]:
+    """The view ids (``learn.tta.VIEW_DIMS``) a network was trained on (``run``, its RunConfig),
+    for test-time flips; a ConfigError when it was trained on the original view only."""
+    from learn.train import views_of
+
+    views = views_of(run).tolist()
+    if len(views) < 2:
+        raise ConfigError(f"{ckpt_path} was trained without flips (flips = false), so test-time "
+                          "flips would show it views it never saw. Fix: evaluate it without "
+                          "--tta, or train with flips = true")  # fmt: skip
+    return views
 
 
 def shared_with_training(train_data: dict | None, data_path: str | Path) -> dict | None:

@@ -25,9 +25,10 @@ import torch
 from matplotlib.figure import Figure
 
 from learn.checkpoint import load_checkpoint
-from learn.evaluate import fast_inference
+from learn.evaluate import fast_inference, tta_views
 from learn.folder import is_dataset, read_grey
 from learn.inputs import net_input
+from learn.tta import FlipTTA
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 from tactile.labels import PartSummary, backproject, part_summary
@@ -52,14 +53,19 @@ class Predictor:
             return self.model(torch.from_numpy(x)[None, None])[0].float()
 
 
-def load_predictor(path: str | Path) -> Predictor:
-    """A checkpoint written by ``handskin train``, ready for fast CPU inference."""
+def load_predictor(path: str | Path, tta: bool = False) -> Predictor:
+    """A checkpoint written by ``handskin train``, ready for fast CPU inference; ``tta``: with
+    test-time flips over the views it was trained on (`learn.tta.FlipTTA`; its logits are
+    then the log of the mean softmax)."""
     from learn.checkpoint import model_from_checkpoint
 
     ckpt = load_checkpoint(path)
     model, run = model_from_checkpoint(ckpt)
     names = tuple(ckpt.get("class_names") or ())
-    return Predictor(fast_inference(model), run.task, run.model.input_size, names)
+    fast = fast_inference(model)
+    if tta:
+        fast = FlipTTA(fast, tta_views(run, path))
+    return Predictor(fast, run.task, run.model.input_size, names)
 
 
 @dataclass

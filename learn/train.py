@@ -39,10 +39,10 @@ from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
 from learn.losses import SegmentationLoss
 from learn.models import create_model
+from learn.tta import VIEW_DIMS
 from tactile.config import from_dict, read_toml, to_dict, to_toml
 from tactile.errors import ConfigError
 
-N_VIEWS = 3  # original, horizontal flip, vertical flip
 TASK_OF_ARCH = {"handsnet": "classify", "vgg16": "classify", "segnet": "segment",
                 "fcn16s": "segment"}  # fmt: skip
 
@@ -104,11 +104,11 @@ def epoch_seed(seed: int, epoch: int) -> int:
 
 def flip_views(x: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
     """Apply view 1 (columns reversed) / 2 (rows reversed) / 3 (both: a 180-degree turn) per
-    item of ``x`` (B, ..., H, W); view 0 leaves an item as it is."""
+    item of ``x`` (B, ..., H, W) (``learn.tta.VIEW_DIMS``); view 0 leaves an item as it is."""
     x = x.clone()
-    for view, dims in ((1, (-1,)), (2, (-2,)), (3, (-2, -1))):
+    for view, dims in VIEW_DIMS.items():
         sel = views == view
-        if sel.any():
+        if dims and sel.any():
             x[sel] = x[sel].flip(dims)
     return x
 

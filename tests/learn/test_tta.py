@@ -1,0 +1,129 @@
+"""Test-time flips (`learn.tta`): against a slow image-by-image, view-by-view reference, closed
+forms for flip-symmetric networks, and through `handskin evaluate` / `predict --tta`."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+import typer
+from torch import nn
+from typer.testing import CliRunner
+
+from learn.checkpoint import load_checkpoint, save_checkpoint
+from learn.cli import register
+from learn.evaluate import evaluate_checkpoint
+from learn.models import create_model
+from learn.predict import load_predictor
+from learn.tta import FlipTTA
+
+SIZE = (32, 40)
+
+
+def slow_reference(model: nn.Module, x: torch.Tensor, views: list[int]) -> torch.Tensor:
+    """log of the mean softmax, one image and one view at a time, flips written out with numpy
+    index reversal (a view's output of a segmenter is reversed back the same way)."""
+    rev = {0: (slice(None), slice(None)), 1: (slice(None), slice(None, None, -1)),
+           2: (slice(None, None, -1), slice(None)), 3: (slice(None, None, -1),) * 2}  # fmt: skip
+    out = []
+    with torch.no_grad():
+        for img in x.numpy():  # (1, h, w)
+            probs = []
+            for v in views:
+                seen = np.ascontiguousarray(img[(slice(None), *rev[v])])
+                p = model(torch.from_numpy(seen)[None])[0].softmax(0).numpy()
+                probs.append(np.ascontiguousarray(p[(slice(None), *rev[v])]) if p.ndim == 3 else p)
+            out.append(np.log(np.mean(probs, axis=0)))
+    return torch.from_numpy(np.stack(out))
+
+
+@pytest.mark.parametrize(("arch", "views"), [("handsnet", [0, 1, 2]), ("segnet", [0, 1, 2]),
+                                             ("fcn16s", [0, 1, 2, 3]), ("segnet", [0, 3])])
+def test_matches_the_slow_reference(arch, views):
+    torch.manual_seed(0)
+    kw = {"input_size": SIZE} if arch == "handsnet" else {"width": 0.0625}
+    model = create_model(arch, num_classes=2 if arch == "handsnet" else 7, **kw).eval()
+    x = torch.rand(3, 1, *SIZE)
+    with torch.no_grad():
+        got = FlipTTA(model, views)(x)
+    torch.testing.assert_close(got, slow_reference(model, x, views).float(), atol=2e-5, rtol=1e-4)
+    assert torch.allclose(got.exp().sum(1), torch.ones(()))  # a distribution per image or pixel
+
+
+def test_flip_symmetric_networks_are_unchanged():
+    """A 1 x 1 convolution commutes with flips, and a global mean is blind to them: test-time
+    flips then give the network's own log-softmax."""
+    torch.manual_seed(1)
+    x = torch.rand(4, 1, *SIZE)
+    pixelwise = nn.Conv2d(1, 7, 1)
+    pooled = nn.Sequential(nn.Conv2d(1, 5, 1), nn.AdaptiveAvgPool2d(1), nn.Flatten(),
+                           nn.Linear(5, 2))  # fmt: skip
+    with torch.no_grad():
+        for net in (pixelwise, pooled):
+            got = FlipTTA(net, (0, 1, 2, 3))(x)
+            torch.testing.assert_close(got, net(x).log_softmax(1), atol=1e-5, rtol=1e-5)
+
+
+@pytest.mark.parametrize("views", [(0,), (0, 0), (0, 5), ()])
+def test_bad_views(views):
+    with pytest.raises(ValueError, match="two or more distinct"):
+        FlipTTA(nn.Conv2d(1, 2, 1), views)
+
+
+def without_flips(path, tmp_path):
+    """A copy of checkpoint ``path`` whose run config says it was trained without flips."""
+    ckpt = load_checkpoint(path)
+    ckpt["config"] = dict(ckpt["config"], flips=False)
+    return save_checkpoint(ckpt, tmp_path / "noflips.pt")
+
+
+def test_evaluate_with_test_time_flips(checkpoints, tiny_dataset, tmp_path):
+    """`handskin evaluate --tta`: a second row per network, scored with the flips; its
+    confusion matrix is the slow reference's; a network trained without flips is refused before
+    any report is written."""
+    from learn.checkpoint import model_from_checkpoint
+    from learn.folder import materialize, open_split
+    from learn.metrics import confusion_matrix
+
+    # HandsNet: SegNet's unpooling breaks max-pool ties by batch layout, which moves near-tied
+    # pixels of a barely trained net; the classifier's decision does not depend on the batch
+    row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3, tta=True)
+    assert row["tta_views"] == [0, 1, 2] and row["ms_per_image"]["fast"] > 0
+    model, run = model_from_checkpoint(load_checkpoint(checkpoints["handsnet"]))
+    test = materialize(open_split(tiny_dataset, "test", "classify", run.model.input_size, None,
+                                  run.train.seed), "test", False)  # fmt: skip
+    pred = slow_reference(model, test.x, [0, 1, 2]).argmax(1)
+    assert row["cm"] == confusion_matrix(test.y, pred, 2).tolist()
+
+    app = typer.Typer()
+    register(app)
+    md = tmp_path / "r.md"
+    args = ["evaluate", str(checkpoints["handsnet"]), str(checkpoints["segnet"]), "--data",
+            str(tiny_dataset), "--report", str(md), "--tta"]  # fmt: skip
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    rows = json.loads(md.with_suffix(".json").read_text())
+    assert [(r["arch"], r["tta_views"]) for r in rows] == [
+        ("handsnet", None), ("handsnet", [0, 1, 2]), ("segnet", None), ("segnet", [0, 1, 2])]
+    text = md.read_text()
+    assert "| HandsNet + test-time flips |" in text and "| SegNet + test-time flips |" in text
+    assert "run as one batch of 3 images" in text
+    bad = without_flips(checkpoints["segnet"], tmp_path)
+    md2 = tmp_path / "r2.md"
+    res = CliRunner().invoke(app, ["evaluate", str(checkpoints["handsnet"]), str(bad), "--data",
+                                   str(tiny_dataset), "--report", str(md2), "--tta"])  # fmt: skip
+    assert res.exit_code == 2 and "trained without flips" in res.output, res.output
+    assert not md2.exists()
+
+
+def test_predict_with_test_time_flips(checkpoints, tiny_dataset, tmp_path):
+    """`load_predictor(tta=True)`: probabilities are the mean of the three views' softmax."""
+    plain, tta = (load_predictor(checkpoints["handsnet"], t) for t in (False, True))
+    image = (np.random.default_rng(0).random((40, 60)) * 255).astype(np.uint8)
+    views = [image, image[:, ::-1], image[::-1]]
+    mean = torch.stack([plain.logits(v).softmax(0) for v in views]).mean(0)
+    torch.testing.assert_close(tta.logits(image).softmax(0), mean, atol=1e-3, rtol=1e-3)
+    with pytest.raises(Exception, match="trained without flips"):
+        load_predictor(without_flips(checkpoints["segnet"], tmp_path), tta=True)
