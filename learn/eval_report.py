@@ -61,15 +61,26 @@ TTA_SUFFIX = " + test-time flips"
 
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
-    test-time flips), with the training data and then the run folder added where two rows would
-    otherwise share a label."""
+    test-time flips); where two rows would share a label, the width multiplier (when theirs
+    differ), then the training data, then the run folder, added."""
     labels = [ARCH_LABEL.get(r["arch"], r["arch"]) + (TTA_SUFFIX if r.get("tta_views") else "")
               for r in rows]  # fmt: skip
-    for extra in (_data_name, lambda r: Path(r["checkpoint"]).parent.name):
-        dup = {lab for lab in labels if labels.count(lab) > 1}
+    for extra, only_if_differs in ((_width_name, True), (_data_name, False),
+                                   (lambda r: Path(r["checkpoint"]).parent.name, False)):
+        groups: dict[str, set[str]] = {}
+        for lab, r in zip(labels, rows, strict=True):
+            groups.setdefault(lab, set()).add(extra(r))
+        dup = {lab for lab in labels if labels.count(lab) > 1
+               and (len(groups[lab]) > 1 or not only_if_differs)}  # fmt: skip
         labels = [f"{lab}, {extra(r)}" if lab in dup else lab
                   for lab, r in zip(labels, rows, strict=True)]  # fmt: skip
     return labels
+
+
+def _width_name(r: dict) -> str:
+    """``w<multiplier>`` of a network row (``default width`` without one)."""
+    width = ((r.get("config") or {}).get("model") or {}).get("width")
+    return "default width" if width is None else f"w{width:g}"
 
 
 def _ours(rows: list[dict], task: str) -> dict[str, dict]:
@@ -86,12 +97,24 @@ def _shown_longer(name: str, ours: dict[str, dict]) -> bool:
     return name not in ours and any(o.startswith(name + ",") for o in ours)
 
 
+def _names(paper_table: dict, ours: dict[str, dict]) -> list[str]:
+    """Row order of a table: the paper's methods, then ours; a row with test-time flips right
+    after the same method's plain row."""
+    names = list(dict.fromkeys([*paper_table, *ours]))
+    plain = [n for n in names if TTA_SUFFIX not in n]
+    for n in (n for n in names if TTA_SUFFIX in n):
+        base = n.replace(TTA_SUFFIX, "")
+        after = [i for i, p in enumerate(plain) if p == base or p.startswith(base + ",")]
+        plain.insert(after[-1] + 1 if after else len(plain), n)
+    return plain
+
+
 def _table3(rows: list[dict]) -> list[str]:
     ours = _ours(rows, "classify")
     out = ["## Hand / non-hand classification (paper: Table 3)", "",
            "| method | accuracy % (ours) | CPU ms/image (ours, batch 1) | accuracy % (paper) "
            "| ms/image (paper) | trained on |", "|---|---|---|---|---|---|"]  # fmt: skip
-    for name in dict.fromkeys([*PAPER_TABLE3, *ours]):
+    for name in _names(PAPER_TABLE3, ours):
         if _shown_longer(name, ours):
             continue
         r, (p_acc, p_ms) = ours.get(name), _paper_row(name, PAPER_TABLE3, 2)
@@ -108,7 +131,7 @@ def _table8(rows: list[dict]) -> list[str]:
            "| method | Acc % | mAcc % | mIoU % | fwIoU % | CPU ms/image (fast path) "
            "| paper Acc % | paper mAcc % | paper mIoU % | paper fwIoU % | paper ms/image "
            "| trained on |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    for name in dict.fromkeys([*PAPER_TABLE8, *ours]):
+    for name in _names(PAPER_TABLE8, ours):
         if _shown_longer(name, ours):
             continue
         r, paper = ours.get(name), _paper_row(name, PAPER_TABLE8, 5)

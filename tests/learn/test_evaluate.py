@@ -191,3 +191,24 @@ def test_vgg_svm_needs_a_vgg16_checkpoint(checkpoints, tiny_dataset, tmp_path):
     with pytest.raises(ConfigError, match="needs a vgg16 one"):
         train_classical("vgg_svm", tiny_dataset, tmp_path, init=checkpoints["handsnet"])
     assert not (tmp_path / MODEL_FILE).exists()
+
+
+def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
+    """Rows of one method at two widths are told apart by width; a row with test-time flips
+    follows the same model's plain row in the table."""
+    from learn.eval_report import _names, row_labels
+    from learn.evaluate import PAPER_TABLE8
+
+    a = {"arch": "segnet", "config": {"model": {"width": 0.25}}, "checkpoint": "/r/a/best.pt",
+         "train_data": {"path": "/d/hands9k", "n_train": 5384}, "tta_views": None}
+    b = dict(a, config={"model": {"width": 0.5}}, checkpoint="/r/b/best.pt")
+    rows = [a, b, dict(a, tta_views=[0, 1, 2]), dict(b, tta_views=[0, 1, 2])]
+    labels = row_labels(rows)
+    assert labels == ["SegNet, w0.25", "SegNet, w0.5", "SegNet + test-time flips, w0.25",
+                      "SegNet + test-time flips, w0.5"]  # fmt: skip
+    assert _names(PAPER_TABLE8, dict.fromkeys(labels)) == [
+        "SegNet", "FCN", "SegNet, w0.25", "SegNet + test-time flips, w0.25", "SegNet, w0.5",
+        "SegNet + test-time flips, w0.5"]  # fmt: skip
+    # the same width says nothing, so it is left out; the data, then the run folder, follow
+    same = row_labels([a, dict(a, checkpoint="/r/c/best.pt")])
+    assert same == ["SegNet, hands9k (5,384 train), a", "SegNet, hands9k (5,384 train), c"]
