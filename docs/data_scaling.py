@@ -25,7 +25,7 @@ import matplotlib.ticker
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from learn.eval_report import TTA_SUFFIX
+from learn.eval_report import TTA_SUFFIX, width_label
 from learn.evaluate import ARCH_LABEL
 from learn.experiments import paper
 
@@ -55,9 +55,8 @@ def points(paths: list[Path]) -> dict[str, dict[str, list[tuple[int, float, str]
 def method_of(row: dict) -> str:
     """A row's line: the method's name, its width multiplier when it has one, and whether it
     was scored with test-time flips (``handskin evaluate --tta``)."""
-    model = (row.get("config") or {}).get("model") or {}
-    width = "" if model.get("width") is None else f" w{model['width']:g}"
-    return ARCH_LABEL.get(row["arch"], row["arch"]) + width + (
+    width = width_label(row)
+    return ARCH_LABEL.get(row["arch"], row["arch"]) + ("" if width is None else f" {width}") + (
         TTA_SUFFIX if row.get("tta_views") else "")  # fmt: skip
 
 

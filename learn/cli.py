@@ -196,10 +196,11 @@ def evaluate_command(
     tta: EvalTtaOpt = False,
 ) -> None:
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
-    from learn.checkpoint import load_checkpoint, model_from_checkpoint, versions
+    from learn.checkpoint import load_checkpoint, versions
     from learn.classical import load_npz
     from learn.eval_report import write_report
     from learn.evaluate import evaluate_checkpoint, tta_views
+    from learn.train import run_from_dict
 
     try:
         _check_data(data)
@@ -208,7 +209,7 @@ def evaluate_command(
             if c.suffix == ".npz":
                 load_npz(c)
             elif tta:  # a network trained without flips fails here, before any work
-                tta_views(model_from_checkpoint(load_checkpoint(c))[1], c)
+                tta_views(run_from_dict(load_checkpoint(c)["config"]), c)
             else:
                 load_checkpoint(c)
             jobs += [(c, False)] + ([(c, True)] if tta and c.suffix != ".npz" else [])

@@ -65,7 +65,8 @@ def row_labels(rows: list[dict]) -> list[str]:
     differ), then the training data, then the run folder, added."""
     labels = [ARCH_LABEL.get(r["arch"], r["arch"]) + (TTA_SUFFIX if r.get("tta_views") else "")
               for r in rows]  # fmt: skip
-    for extra, only_if_differs in ((_width_name, True), (_data_name, False),
+    for extra, only_if_differs in ((lambda r: width_label(r) or "default width", True),
+                                   (_data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False)):
         groups: dict[str, set[str]] = {}
         for lab, r in zip(labels, rows, strict=True):
@@ -77,10 +78,10 @@ def row_labels(rows: list[dict]) -> list[str]:
     return labels
 
 
-def _width_name(r: dict) -> str:
-    """``w<multiplier>`` of a network row (``default width`` without one)."""
+def width_label(r: dict) -> str | None:
+    """``w<multiplier>`` of a report row's network (None: no width multiplier configured)."""
     width = ((r.get("config") or {}).get("model") or {}).get("width")
-    return "default width" if width is None else f"w{width:g}"
+    return None if width is None else f"w{width:g}"
 
 
 def _ours(rows: list[dict], task: str) -> dict[str, dict]:
