@@ -65,13 +65,13 @@ def chart(pts: dict, png: Path) -> Path:
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, (task, _, ylabel, title) in zip(axes, TASKS, strict=True):
         drawn = set()  # methods whose paper line is drawn
+        labels = []  # (train samples, score %, text, colour) of every point
         for method, rows in sorted(pts.get(task, {}).items()):
             rows = sorted(rows)
             style = "o:" if method.endswith(TTA_SUFFIX) else "o-"
             line = ax.plot([r[0] for r in rows], [r[1] for r in rows], style, label=method)[0]
-            for n, score, name in rows:
-                ax.annotate(f"{score:.1f} ({name})", (n, score), textcoords="offset points",
-                            xytext=(4, -12), fontsize=7, color=line.get_color())  # fmt: skip
+            labels += [(n, score, f"{score:.1f} ({name})", line.get_color())
+                       for n, score, name in rows]  # fmt: skip
             base = method.split(" ")[0]
             if base in PAPER and base not in drawn:
                 drawn.add(base)
@@ -87,6 +87,7 @@ def chart(pts: dict, png: Path) -> Path:
         ax.set_xticks([t for t in (500, 1000, 2000, 3000, 5000, 10000, 20000, 50000)
                        if lo <= t <= hi])  # fmt: skip
         ax.margins(y=0.12)
+        _label_points(ax, labels)
         ax.set(xlabel="training samples (count, log scale; segmenters: hand images)",
                ylabel=ylabel, title=title)  # fmt: skip
         ax.grid(alpha=0.3)
@@ -96,6 +97,35 @@ def chart(pts: dict, png: Path) -> Path:
     fig.tight_layout()
     fig.savefig(png, dpi=110)
     return png
+
+
+def spread(ys: list[float], gap: float) -> list[float]:
+    """Label heights for points at heights ``ys`` (one x): each label at its point, moved down
+    just enough to sit ``gap`` below the label above it (same order as ``ys``)."""
+    out, last = [0.0] * len(ys), None
+    for i in sorted(range(len(ys)), key=lambda i: -ys[i]):
+        out[i] = ys[i] if last is None else min(ys[i], last - gap)
+        last = out[i]
+    return out
+
+
+def _label_points(ax, labels: list[tuple[int, float, str, str]]) -> None:
+    """Write each point's score right of it; labels of points at one x are spread apart so they
+    do not overlap (a thin line joins a moved label to its point)."""
+    lo, hi = ax.get_ylim()
+    gap = 0.045 * (hi - lo)
+    by_x: dict[int, list] = defaultdict(list)
+    for lab in labels:
+        by_x[lab[0]].append(lab)
+    lowest = lo
+    for n, group in by_x.items():
+        heights = spread([score for _, score, _, _ in group], gap)
+        lowest = min(lowest, min(heights) - gap)
+        for (_, score, text, color), y in zip(group, heights, strict=True):
+            line = {"arrowstyle": "-", "lw": 0.5, "color": color}
+            ax.annotate(text, (n, score), xytext=(n * 1.06, y), textcoords="data", fontsize=7,
+                        color=color, va="center", arrowprops=line if y != score else None)
+    ax.set_ylim(lowest, hi)
 
 
 def main() -> None:

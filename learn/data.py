@@ -19,6 +19,7 @@ import torch
 from torch.utils.data import Dataset
 
 from learn.inputs import net_input
+from learn.tta import PAPER_VIEWS, flip_array
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 from tactile.faults import (
@@ -34,7 +35,6 @@ from tactile.tactile_map import TactileMap
 
 TASKS = ("classify", "segment")
 SPLITS = ("train", "test")
-N_VIEWS = 3  # the paper's threefold augmentation: original, horizontal flip, vertical flip
 MAP_CACHE = 4  # rebuilt maps (taxel removal) kept per worker
 
 FaultFn = Callable[[np.ndarray, np.random.Generator], np.ndarray]  # (N,) Pa, rng -> (N,) Pa
@@ -164,23 +164,24 @@ class TorchTactileDataset(Dataset):
         return {**self.__dict__, "_maps": {}}
 
     def __len__(self) -> int:
-        return len(self.indices) * (N_VIEWS if self.flips else 1)
+        return len(self.indices) * (len(PAPER_VIEWS) if self.flips else 1)
 
     def __getitem__(self, j: int) -> tuple[torch.Tensor, torch.Tensor]:
         if not 0 <= j < len(self):
             raise IndexError(f"item {j} out of range for {len(self)} items")
-        base, view = divmod(j, N_VIEWS) if self.flips else (j, 0)
+        base, view = divmod(j, len(PAPER_VIEWS)) if self.flips else (j, 0)
         i = int(self.indices[base])
         image, labels = self.image_and_labels(i)
         x = image.astype(np.float32) / np.float32(255.0)
         if self.size is not None:
             x = net_input(x, self.size, self.task)
-        x = torch.from_numpy(np.ascontiguousarray(flip(x, view)))[None]
+        x = torch.from_numpy(np.ascontiguousarray(flip_array(x, PAPER_VIEWS[view])))[None]
         if self.task == "classify":
             return x, torch.tensor(int(self.reader.is_hand[i]), dtype=torch.int64)
         if self.size is not None:
             labels = resize_labels(labels, self.size)
-        return x, torch.from_numpy(np.ascontiguousarray(flip(labels, view)).astype(np.int64))
+        labels = np.ascontiguousarray(flip_array(labels, PAPER_VIEWS[view]))
+        return x, torch.from_numpy(labels.astype(np.int64))
 
     def image_and_labels(self, i: int) -> tuple[np.ndarray, np.ndarray | None]:
         """Sample i's (H', W') uint8 image and, for segmentation, (H', W') uint8 label image —
@@ -223,8 +224,3 @@ class TorchTactileDataset(Dataset):
             sub = self.reader.layout.subset(keep)
             self._maps[key] = (keep, TactileMap.build(sub, step_mm=self.reader.map.step_mm))
         return self._maps[key]
-
-
-def flip(arr: np.ndarray, view: int) -> np.ndarray:
-    """View 0: as is; 1: horizontal flip (columns reversed); 2: vertical flip (rows reversed)."""
-    return arr if view == 0 else arr[..., ::-1] if view == 1 else arr[..., ::-1, :]

@@ -26,6 +26,7 @@ from tqdm.auto import tqdm
 
 from learn.inputs import net_input
 from learn.losses import class_pixel_counts, median_frequency_weights
+from learn.tta import PAPER_VIEWS, flip_array
 from tactile.dataset.reader import DATASET, DatasetReader
 from tactile.dataset.splits import split_indices
 from tactile.errors import DataError
@@ -95,7 +96,7 @@ class FolderDataset(Dataset):
         self.indices = _split(self.targets, split, test_fraction, seed)
 
     def __len__(self) -> int:
-        return len(self.indices) * (3 if self.flips else 1)
+        return len(self.indices) * (len(PAPER_VIEWS) if self.flips else 1)
 
     def label_path(self, i: int) -> Path:
         """The label PNG of image ``i``: ``labels/<same relative path>.png``."""
@@ -103,18 +104,14 @@ class FolderDataset(Dataset):
         return self.label_root / rel
 
     def __getitem__(self, j: int) -> tuple[torch.Tensor, torch.Tensor]:
-        base, view = divmod(j, 3) if self.flips else (j, 0)
+        base, view = divmod(j, len(PAPER_VIEWS)) if self.flips else (j, 0)
         i = int(self.indices[base])
         x = net_input(read_grey(self.files[i]).astype(np.float32) / 255.0, self.size, self.task)
-        x = torch.from_numpy(_flip(x, view).copy())[None]
+        x = torch.from_numpy(flip_array(x, PAPER_VIEWS[view]).copy())[None]
         if self.task == "classify":
             return x, torch.tensor(int(self.targets[i]), dtype=torch.int64)
         y = resize_labels(read_label_png(self.label_path(i)), self.size)
-        return x, torch.from_numpy(_flip(y, view).astype(np.int64))
-
-
-def _flip(arr: np.ndarray, view: int) -> np.ndarray:
-    return arr if view == 0 else arr[:, ::-1] if view == 1 else arr[::-1, :]
+        return x, torch.from_numpy(flip_array(y, PAPER_VIEWS[view]).astype(np.int64))
 
 
 def _classes(folders: list[str], hand_classes: Sequence[str] | None, root: Path):

@@ -39,7 +39,7 @@ from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
 from learn.losses import SegmentationLoss
 from learn.models import create_model
-from learn.tta import VIEW_DIMS
+from learn.tta import PAPER_VIEWS, VIEW_DIMS
 from tactile.config import from_dict, read_toml, to_dict, to_toml
 from tactile.errors import ConfigError
 
@@ -116,7 +116,7 @@ def flip_views(x: torch.Tensor, views: torch.Tensor) -> torch.Tensor:
 def views_of(run: RunConfig) -> torch.Tensor:
     """(V,) int64 ids (`flip_views`) of the views each training sample is shown in: 0; 1 and 2
     with ``run.flips`` (the paper's three); 3 with ``run.rot180``."""
-    return torch.tensor([0, *((1, 2) if run.flips else ()), *((3,) if run.rot180 else ())])
+    return torch.tensor([*(PAPER_VIEWS if run.flips else (0,)), *((3,) if run.rot180 else ())])
 
 
 def get_batch(data: TensorData, items: torch.Tensor,
@@ -187,7 +187,12 @@ def _restore(out: Path, run: RunConfig, model, optimizer, scheduler):
     """(start epoch, best metric, history, best weights, recorded start) of the run in ``out``
     (last.pt)."""
     ckpt = load_checkpoint(out / LAST)
-    mine, theirs = to_dict(run), dict(ckpt["config"])
+    try:  # keys added since the checkpoint was written take their defaults (the old behaviour)
+        theirs = to_dict(run_from_dict(ckpt["config"]))
+    except ConfigError as err:
+        raise ConfigError(f"{out / LAST}: its configuration does not load ({err}); use a new "
+                          "--out") from err  # fmt: skip
+    mine = to_dict(run)
     mine["train"] = {**mine["train"], "epochs": None}
     theirs["train"] = {**theirs["train"], "epochs": None}
     if mine != theirs:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import numpy as np
 import torch
 from torch import nn
 
@@ -22,11 +23,20 @@ from torch import nn
 #: 2 rows (a vertical flip), 3 both (a 180-degree turn).
 VIEW_DIMS: dict[int, tuple[int, ...]] = {0: (), 1: (-1,), 2: (-2,), 3: (-2, -1)}
 
+#: The paper's threefold augmentation: original, columns reversed, rows reversed.
+PAPER_VIEWS: tuple[int, ...] = (0, 1, 2)
+
 
 def flip_view(x: torch.Tensor, view: int) -> torch.Tensor:
     """``x`` (..., H, W) in view ``view`` (`VIEW_DIMS`); a flip is its own inverse."""
     dims = VIEW_DIMS[int(view)]
     return x.flip(dims) if dims else x
+
+
+def flip_array(arr: np.ndarray, view: int) -> np.ndarray:
+    """numpy ``arr`` (..., H, W) in view ``view`` (`VIEW_DIMS`), as a strided view (no copy)."""
+    dims = VIEW_DIMS[int(view)]
+    return np.flip(arr, dims) if dims else arr
 
 
 class FlipTTA(nn.Module):

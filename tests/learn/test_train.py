@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from learn.checkpoint import load_checkpoint, model_from_checkpoint
+from learn.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
 from learn.config import FINETUNE_TEST_C
 from learn.crossval import cross_validate, folds, parse_grid
 from learn.data import TorchTactileDataset
@@ -80,6 +80,23 @@ def test_checkpoint_round_trip_and_resume(tiny_dataset, tiny_run, tmp_path):
         assert torch.allclose(model(x), full.model.eval()(x))
     assert (tmp_path / "full" / "curves.png").stat().st_size > 0
     assert ckpt["init"] == "random"
+
+
+def test_resume_a_checkpoint_older_than_a_config_key(tiny_dataset, tiny_run, tmp_path):
+    """A last.pt written before a key existed (here ``rot180``, added later) resumes: the missing
+    key takes its default, the old behaviour. Any other difference is still refused."""
+    run = tiny_run("handsnet", epochs=2)
+    data = load_data(tiny_dataset, run)
+    full = fit(run, data, tmp_path / "full", progress=False)
+    fit(run, data, tmp_path / "cut", progress=False, stop_after_epoch=1)
+    last = tmp_path / "cut" / "last.pt"
+    ckpt = load_checkpoint(last)
+    del ckpt["config"]["rot180"]
+    save_checkpoint(ckpt, last)
+    resumed = fit(run, data, tmp_path / "cut", resume=True, progress=False)
+    assert [h["train_loss"] for h in resumed.history] == [h["train_loss"] for h in full.history]
+    with pytest.raises(ConfigError, match="another configuration"):
+        fit(replace_train(run, lr=0.5), data, tmp_path / "cut", resume=True, progress=False)
 
 
 def test_checkpoint_records_its_start_through_a_resume(tiny_dataset, tiny_run, checkpoints,

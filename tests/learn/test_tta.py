@@ -17,7 +17,7 @@ from learn.cli import register
 from learn.evaluate import evaluate_checkpoint
 from learn.models import create_model
 from learn.predict import load_predictor
-from learn.tta import FlipTTA
+from learn.tta import VIEW_DIMS, FlipTTA, flip_array, flip_view
 
 SIZE = (32, 40)
 
@@ -64,6 +64,18 @@ def test_flip_symmetric_networks_are_unchanged():
         for net in (pixelwise, pooled):
             got = FlipTTA(net, (0, 1, 2, 3))(x)
             torch.testing.assert_close(got, net(x).log_softmax(1), atol=1e-5, rtol=1e-5)
+
+
+@pytest.mark.parametrize("view", sorted(VIEW_DIMS))
+def test_numpy_and_torch_flips_agree_with_index_reversal(view):
+    """The datasets' numpy flip and the training / TTA torch flip both give the written-out
+    index reversal of each view, on (H, W) and (C, H, W) arrays."""
+    rev_rows, rev_cols = view in (2, 3), view in (1, 3)
+    for shape in ((5, 7), (2, 5, 7)):
+        a = np.arange(np.prod(shape)).reshape(shape)
+        want = a[..., ::-1 if rev_rows else 1, :][..., ::-1 if rev_cols else 1]
+        np.testing.assert_array_equal(flip_array(a, view), want)
+        np.testing.assert_array_equal(flip_view(torch.from_numpy(a), view).numpy(), want)
 
 
 @pytest.mark.parametrize("views", [(0,), (0, 0), (0, 5), ()])
