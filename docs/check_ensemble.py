@@ -18,12 +18,10 @@ import torch
 
 from learn import metrics as M
 from learn.checkpoint import load_checkpoint, model_from_checkpoint
-from learn.evaluate import scores, tta_views
+from learn.evaluate import logits_of, scores, tta_views
 from learn.folder import materialize, open_split
 from learn.inputs import unpressed_as_background
 from learn.tta import FlipTTA
-
-BATCH = 64  # images per forward pass
 
 
 def main() -> None:
@@ -38,7 +36,6 @@ def main() -> None:
         model, run = model_from_checkpoint(load_checkpoint(path))
         if run.task != "segment":
             raise SystemExit(f"{path} is a classifier; give segmenter checkpoints")
-        model.eval()
         members.append(model if args.no_tta else FlipTTA(model, tta_views(run, path)))
         sizes.add(tuple(run.model.input_size))
     if len(sizes) != 1:
@@ -46,12 +43,7 @@ def main() -> None:
                          "trained at one size")  # fmt: skip
     split = open_split(args.data, "test", "segment", sizes.pop(), None, run.train.seed)
     test = materialize(split, "test", progress=False)
-    probs = [torch.zeros(len(test.x), run.model.num_classes, *test.x.shape[-2:]) for _ in members]
-    with torch.no_grad():
-        for start in range(0, len(test.x), BATCH):
-            xb = test.x[start : start + BATCH]
-            for p, model in zip(probs, members, strict=True):
-                p[start : start + BATCH] = model(xb).softmax(1)
+    probs = [logits_of(model, test.x).softmax(1) for model in members]
     rows = [*zip(args.checkpoints, probs, strict=True), ("mean of all", sum(probs) / len(probs))]
     flips = "off" if args.no_tta else "on"
     print(f"{len(test.x)} test images of {args.data}; test-time flips {flips}")

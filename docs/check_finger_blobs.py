@@ -33,15 +33,17 @@ FINGERS = range(1, 6)  # thumb .. pinkie (`tactile.labels.CLASS_NAMES`); 6 is th
 def shared_blob_pixels(image: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per finger 1..5: (labelled pixels, of them in a blob holding another finger), (5,) each.
     image (H, W) grey (> 0 where pressed); labels (H, W) class ids."""
-    blobs, _ = ndimage.label(image > 0, structure=np.ones((3, 3)))
+    blobs, n = ndimage.label(image > 0, structure=np.ones((3, 3)))
+    finger = (labels >= 1) & (labels <= 5)
+    # fingers per blob: count of distinct finger ids among each blob's pixels
+    pairs = np.unique(np.stack([blobs[finger], labels[finger]]), axis=1)
+    fingers_in_blob = np.bincount(pairs[0], minlength=n + 1)
+    fingers_in_blob[0] = 0  # unpressed pixels are no blob
     total, shared = np.zeros(5, np.int64), np.zeros(5, np.int64)
     for c in FINGERS:
         ids = blobs[labels == c]
         total[c - 1] = ids.size
-        for k in np.unique(ids[ids > 0]):
-            fingers_here = set(np.unique(labels[blobs == k])) & set(FINGERS)
-            if fingers_here - {c}:
-                shared[c - 1] += int((ids == k).sum())
+        shared[c - 1] = int((fingers_in_blob[ids] > 1).sum())
     return total, shared
 
 
