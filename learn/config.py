@@ -63,7 +63,7 @@ class TrainConfig:
     lr_drop_period_epochs: int = 40  # ... every this many epochs (paper, Table 17)
     batch_size: int = 64  # images per step (paper, Table 17)
     epochs: int = 80  # passes over the training set (paper, Table 17)
-    loss: str = "ce"  # ce | weighted_ce | dice | generalized_dice (learn.losses)
+    loss: str = "ce"  # ce | weighted_ce | dice | generalized_dice | ce_dice (learn.losses)
     # per-layer lr factors, selector -> factor (learn.finetune.param_groups); 0 freezes
     lr_factors: Mapping[str, float] = field(default_factory=dict, hash=False)
     seed: int = 0  # torch / numpy seed of the run

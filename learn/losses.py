@@ -95,13 +95,16 @@ def soft_dice_loss(
 
 
 class SegmentationLoss(nn.Module):
-    """A loss module by name: ``"ce"``, ``"weighted_ce"``, ``"dice"`` or ``"generalized_dice"``.
+    """A loss module by name: ``"ce"``, ``"weighted_ce"``, ``"dice"``, ``"generalized_dice"``
+    or ``"ce_dice"``.
 
     ``forward(logits (B, C, ...), target (B, ...)) → scalar``. ``"weighted_ce"`` needs the
-    ``(C,)`` class weights (e.g. :func:`median_frequency_weights`).
+    ``(C,)`` class weights (e.g. :func:`median_frequency_weights`). ``"ce_dice"`` is plain
+    cross-entropy plus soft Dice with equal weights (as nnU-Net trains): the CE term gives every
+    pixel a gradient from the start, where Dice alone can sit at background-only.
     """
 
-    NAMES = ("ce", "weighted_ce", "dice", "generalized_dice")
+    NAMES = ("ce", "weighted_ce", "dice", "generalized_dice", "ce_dice")
 
     def __init__(self, name: str = "ce", weights: Sequence[float] | np.ndarray | None = None):
         super().__init__()
@@ -115,6 +118,8 @@ class SegmentationLoss(nn.Module):
 
     def forward(self, logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """Scalar loss of ``logits (B, C, ...)`` against ``target (B, ...)`` int64."""
+        if self.name == "ce_dice":
+            return weighted_cross_entropy(logits, target) + soft_dice_loss(logits, target)
         if self.name.endswith("dice"):
             return soft_dice_loss(logits, target, generalized=self.name == "generalized_dice")
         return weighted_cross_entropy(logits, target, self.weights)

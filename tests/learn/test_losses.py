@@ -71,3 +71,27 @@ def test_segmentation_loss_by_name():
         SegmentationLoss("focal")
     with pytest.raises(ConfigError, match="weights"):
         SegmentationLoss("weighted_ce")
+
+
+def test_ce_dice_is_the_sum_of_mean_nll_and_soft_dice_by_loops():
+    g = torch.Generator().manual_seed(2)
+    logits = torch.randn(2, 3, 4, 5, generator=g, dtype=torch.float64)
+    target = torch.randint(0, 3, (2, 4, 5), generator=g)
+    p = logits.softmax(1).numpy()
+    t = target.numpy()
+    nll, inter, total = [], np.zeros(3), np.zeros(3)
+    for b, i, j in np.ndindex(t.shape):
+        nll.append(-np.log(p[b, t[b, i, j], i, j]))
+        for c in range(3):
+            g_c = float(t[b, i, j] == c)
+            inter[c] += p[b, c, i, j] * g_c
+            total[c] += p[b, c, i, j] + g_c
+    expected = np.mean(nll) + 1 - np.mean((2 * inter + 1) / (total + 1))
+    got = SegmentationLoss("ce_dice")(logits, target).item()
+    assert got == pytest.approx(expected, rel=1e-12)
+    # Starting from all-background logits, the CE term still pushes the other classes up.
+    start = torch.zeros(1, 3, 4, 5, requires_grad=True)
+    start.data[:, 0] = 5.0
+    SegmentationLoss("ce_dice")(start, target[:1]).backward()
+    assert (start.grad[:, 1:][torch.nn.functional.one_hot(target[:1], 3).movedim(-1, 1)[:, 1:] > 0]
+            < 0).all()
