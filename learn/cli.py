@@ -185,6 +185,9 @@ EvalHandOpt = _opt(str | None, "Image folders: hand folder names (default: the c
 EvalTtaOpt = _opt(bool, "Also score each network (.pt) with test-time flips, in a row of its "
                   "own: the mean softmax over the views it was trained on (original, columns "
                   "and rows reversed), about 3x the ms per image.", "--tta")
+EnsembleOpt = _opt(bool, "Also score the mean softmax of all the networks (.pt) given for each "
+                   "task with two or more, in a row of its own (and, with --tta, with flips); "
+                   "its ms per image is about the sum of its members'.", "--ensemble")
 
 
 def evaluate_command(
@@ -194,27 +197,33 @@ def evaluate_command(
     threads: ThreadsOpt = 1,
     hand_classes: EvalHandOpt = None,
     tta: EvalTtaOpt = False,
+    ensemble: EnsembleOpt = False,
 ) -> None:
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
     from learn.checkpoint import load_checkpoint, versions
     from learn.classical import load_npz
     from learn.eval_report import write_report
-    from learn.evaluate import evaluate_checkpoint, tta_views
+    from learn.evaluate import evaluate_checkpoint, evaluate_ensemble, tta_views
     from learn.train import run_from_dict
 
     try:
         _check_data(data)
-        jobs = []  # (checkpoint, with test-time flips)
+        jobs = []  # (checkpoint or list of them, with test-time flips)
+        by_task: dict[str, list[Path]] = {}
         for c in checkpoints:
             if c.suffix == ".npz":
                 load_npz(c)
-            elif tta:  # a network trained without flips fails here, before any work
-                tta_views(run_from_dict(load_checkpoint(c)["config"]), c)
-            else:
-                load_checkpoint(c)
-            jobs += [(c, False)] + ([(c, True)] if tta and c.suffix != ".npz" else [])
-        rows = [evaluate_checkpoint(c, data, hand_classes=_hand_classes(hand_classes),
-                                    threads=threads, tta=t) for c, t in jobs]  # fmt: skip
+                jobs.append((c, False))
+                continue
+            run = run_from_dict(load_checkpoint(c)["config"])
+            if tta:  # a network trained without flips fails here, before any work
+                tta_views(run, c)
+            by_task.setdefault(run.task, []).append(c)
+            jobs += [(c, False)] + ([(c, True)] if tta else [])
+        jobs += _ensemble_jobs(by_task, tta) if ensemble else []
+        hand = _hand_classes(hand_classes)
+        rows = [(evaluate_ensemble if isinstance(c, list) else evaluate_checkpoint)(
+            c, data, hand_classes=hand, threads=threads, tta=t) for c, t in jobs]  # fmt: skip
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     from learn.leakage import leakage_note
@@ -228,6 +237,20 @@ def evaluate_command(
     typer.echo(f"report written to {report}")
 
 
+def _ensemble_jobs(by_task: dict[str, list[Path]], tta: bool) -> list[tuple[list[Path], bool]]:
+    """``--ensemble``'s jobs: each task's networks together, checked alike before any work."""
+    from learn.ensemble import load_members
+
+    groups = [paths for paths in by_task.values() if len(paths) >= 2]
+    if not groups:
+        counts = ", ".join(f"{len(p)} {t}" for t, p in by_task.items()) or "no networks"
+        raise ConfigError(f"--ensemble averages two or more networks of one task; got {counts}. "
+                          "Fix: give two or more classifier or segmenter .pt files")
+    for paths in groups:
+        load_members(paths)
+    return [(paths, t) for paths in groups for t in ((False, True) if tta else (False,))]
+
+
 ImageOpt = _opt(Path | None, "A tactile image file (grey PNG/JPG, any size in pixels).")
 FrameOpt = _opt(Path | None, "A taxel frame (.csv row or .npy) of N taxel or C channel values.")
 MapOpt = _opt(Path | None, "For --frame: a dataset folder (its map; values are raw counts, "
@@ -235,8 +258,10 @@ MapOpt = _opt(Path | None, "For --frame: a dataset folder (its map; values are r
 PredDataOpt = _opt(Path | None, "A dataset folder: predict its sample --index (the stored "
                    "image; raw counts converted to Pa; the ground truth shown when stored).")
 IndexOpt = _opt(int | None, "Sample of --data (count, 0-based).")
-ClfOpt = _opt(Path | None, "Classifier checkpoint (.pt file).")
-SegOpt = _opt(Path | None, "Segmenter checkpoint (.pt file).")
+ClfOpt = _opt(list[Path] | None, "Classifier checkpoint (.pt file); give it again to average "
+              "several networks' softmax (an ensemble, about the sum of their times).")
+SegOpt = _opt(list[Path] | None, "Segmenter checkpoint (.pt file); give it again to average "
+              "several networks' softmax (an ensemble, about the sum of their times).")
 PngOpt = _opt(Path | None, "Write the Figs. 12-13 figure here (PNG, 90 dpi: image, truth when "
               "known, prediction, errors in red) and Fig. 18's per-part bars (kPa, taxel "
               "count) beside it as <stem>_parts.png.")
@@ -277,8 +302,8 @@ def predict_command(
         sample = None if data is None else P.read_sample(data, index)
         if sample is not None and threshold_pa is not None:
             sample = dataclasses.replace(sample, threshold_pa=threshold_pa)
-        clf = None if classifier is None else P.load_predictor(classifier, tta)
-        seg = None if segmenter is None else P.load_predictor(segmenter, tta)
+        clf = _predictor(P, classifier, tta)
+        seg = _predictor(P, segmenter, tta)
         pred = _predict(P, image, frame, map_, sample, clf, seg, step_mm, threshold_pa or 0.0)
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
@@ -288,9 +313,17 @@ def predict_command(
         np.save(save_labels, pred.taxel_labels.astype(np.uint8))
         typer.echo(f"per-taxel labels written to {save_labels}")
     if png is not None:
-        name = "predicted" if seg is None else f"predicted ({segmenter.parent.name or 'model'})"
+        folders = " + ".join(p.parent.name or "model" for p in segmenter or ())
+        name = "predicted" if seg is None else f"predicted ({folders})"
         for path in P.save_figures(pred, png, name):
             typer.echo(f"picture written to {path}")
+
+
+def _predictor(P, paths: list[Path] | None, tta: bool):
+    """None, one network, or the mean softmax of several (``--segmenter`` given twice)."""
+    if not paths:
+        return None
+    return P.load_predictor(paths[0] if len(paths) == 1 else paths, tta)
 
 
 def _predict(P, image, frame, map_, sample, clf, seg, step_mm, threshold_pa):

@@ -46,7 +46,7 @@ def trained_on(r: dict) -> str:
 
 def _init_text(r: dict) -> str:
     """The report's sentence on where a network's training started (checkpoints record it)."""
-    if r.get("timing"):  # classical: no network trained here, or described in its config
+    if r.get("timing") or r.get("members"):  # classical, or an ensemble (members listed)
         return ""
     init = r.get("init")
     if init is None:
@@ -63,8 +63,7 @@ def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
     test-time flips); where two rows would share a label, the width multiplier (when theirs
     differ), then the training data, then the run folder, added."""
-    labels = [ARCH_LABEL.get(r["arch"], r["arch"]) + (TTA_SUFFIX if r.get("tta_views") else "")
-              for r in rows]  # fmt: skip
+    labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
     for extra, only_if_differs in ((lambda r: width_label(r) or "default width", True),
                                    (_data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False)):
@@ -76,6 +75,13 @@ def row_labels(rows: list[dict]) -> list[str]:
         labels = [f"{lab}, {extra(r)}" if lab in dup else lab
                   for lab, r in zip(labels, rows, strict=True)]  # fmt: skip
     return labels
+
+
+def method_label(r: dict) -> str:
+    """A row's method: ``ARCH_LABEL`` of its arch; for an ensemble, ``mean of A + B``."""
+    if r.get("members"):
+        return "mean of " + " + ".join(ARCH_LABEL.get(m["arch"], m["arch"]) for m in r["members"])
+    return ARCH_LABEL.get(r["arch"], r["arch"])
 
 
 def width_label(r: dict) -> str | None:
@@ -157,16 +163,33 @@ def _timing(r: dict) -> str:
 def _details(r: dict, label: str) -> list[str]:
     names = tuple(r["class_names"]) or tuple(str(i) for i in range(len(r["cm"])))
     epoch = "" if r["epoch"] is None else f"epoch {r['epoch']}, "
+    seed = "" if r.get("members") else f"seed {r['seed']}, "
     size = r.get("input_size") or r["config"]["model"]["input_size"]
     return [f"### {label} — `{r['checkpoint']}` "
-            f"({epoch}seed {r['seed']}, {r['n_test']} test images)", "",
-            f"Trained on: {trained_on(r)}.{_init_text(r)}", "",
+            f"({epoch}{seed}{r['n_test']} test images)", "",
+            f"Trained on: {trained_on(r)}.{_init_text(r)}", "", *_members_text(r),
             *([note, ""] if (note := leakage_note(r.get("shared_with_training"))) else []),
             f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "", *_tta_text(r),
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
             confusion_markdown(torch.tensor(r["cm"]), names), "",
             *_by_size(r), *_merged(r), *_seg_groups(r)]  # fmt: skip
+
+
+def _members_text(r: dict) -> list[str]:
+    """An ensemble row's list of networks; its scores and times are of their mean softmax."""
+    if not r.get("members"):
+        return []
+    lines = ["Ensemble: scores and times are of the mean softmax of these networks "
+             "(`learn.ensemble.MeanSoftmax`), each run on the same input:", ""]  # fmt: skip
+    for m in r["members"]:
+        width = "" if m.get("width") is None else f", w{m['width']:g}"
+        lines.append(f"- `{m['checkpoint']}`: {ARCH_LABEL.get(m['arch'], m['arch'])}{width}, "
+                     f"epoch {m['epoch']}, seed {m['seed']}, trained on "
+                     f"{_data_name({'train_data': m['train_data']})}"
+                     + ("" if not m.get("tta_views") else f", flips over views {m['tta_views']}")
+                     + ".")  # fmt: skip
+    return [*lines, ""]
 
 
 def _tta_text(r: dict) -> list[str]:

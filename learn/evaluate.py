@@ -219,6 +219,36 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     checkpoint (a .pt file; a classical model.npz goes to ``learn.classical.evaluate_classical``);
     a JSON-able dict (one row of the report). ``tta``: every path, timing included, runs with
     test-time flips over the views the network was trained on (`learn.tta.FlipTTA`)."""
+    from learn.checkpoint import load_checkpoint, model_from_checkpoint
+    from learn.ensemble import Member
+
+    if Path(ckpt_path).suffix == ".npz":
+        from learn.classical import evaluate_classical
+
+        return evaluate_classical(ckpt_path, data_path, hand_classes=hand_classes,
+                                  threads=threads, time_runs=time_runs)  # fmt: skip
+    ckpt = load_checkpoint(ckpt_path)
+    model, run = model_from_checkpoint(ckpt)
+    return _evaluate_members([Member(Path(ckpt_path), ckpt, model, run)], data_path,
+                             hand_classes, threads, time_runs, tta)  # fmt: skip
+
+
+def evaluate_ensemble(ckpt_paths: list[str | Path], data_path: str | Path, *,
+                      hand_classes: tuple[str, ...] | None = None, threads: int = 1,
+                      time_runs: int = 100, tta: bool = False) -> dict:  # fmt: skip
+    """`evaluate_checkpoint` of the mean softmax of two or more networks of one task
+    (`learn.ensemble.MeanSoftmax`; with ``tta``, each member with its own test-time flips).
+    The row's ``arch`` is ``"ensemble"``; ``members`` lists each network's checkpoint, arch,
+    width, epoch, seed, training data and views."""
+    from learn.ensemble import load_members
+
+    return _evaluate_members(load_members(ckpt_paths), data_path, hand_classes, threads,
+                             time_runs, tta)  # fmt: skip
+
+
+def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[str, ...] | None,
+                      threads: int, time_runs: int, tta: bool) -> dict:  # fmt: skip
+    """The report row of one network or the mean of several (`learn.ensemble.Member` list)."""
     from learn.breakdown import (
         accuracy_by_active_taxels,
         accuracy_by_group,
@@ -228,18 +258,18 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
         parts_in_contact,
         segmentation_by_group,
     )
-    from learn.checkpoint import load_checkpoint, model_from_checkpoint
+    from learn.ensemble import MeanSoftmax
     from learn.folder import is_dataset, materialize, open_split
 
-    if Path(ckpt_path).suffix == ".npz":
-        from learn.classical import evaluate_classical
+    first, run = members[0], members[0].run
+    views = [tta_views(m.run, m.path) for m in members] if tta else None
 
-        return evaluate_classical(ckpt_path, data_path, hand_classes=hand_classes,
-                                  threads=threads, time_runs=time_runs)  # fmt: skip
-    ckpt = load_checkpoint(ckpt_path)
-    model, run = model_from_checkpoint(ckpt)
-    views = tta_views(run, ckpt_path) if tta else None
-    wrap = (lambda m: FlipTTA(m, views)) if tta else (lambda m: m)
+    def build(path_of) -> nn.Module:  # one inference path of every member, flipped, averaged
+        nets = [path_of(m.model) for m in members]
+        nets = [FlipTTA(n, v) for n, v in zip(nets, views, strict=True)] if tta else nets
+        return nets[0] if len(nets) == 1 else MeanSoftmax(nets)
+
+    ckpt = first.ckpt
     hand = hand_classes or (ckpt.get("data") or {}).get("hand_classes")
     split = open_split(Path(data_path), "test", run.task, run.model.input_size, hand,
                        run.train.seed)  # fmt: skip
@@ -247,7 +277,8 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     n_cls = run.model.num_classes
     on_dataset = is_dataset(data_path)
     classify_data = run.task == "classify" and on_dataset
-    ref = evaluate_tensors(wrap(model), test, n_cls, keep_predictions=on_dataset)
+    model = build(lambda m: m)
+    ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
     by_size = by_contactor = seg_groups = None
     if classify_data:  # accuracy by contact size and by contactor
         pred = ref.predictions.numpy()
@@ -264,27 +295,47 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                                                n_cls),
             "action": segmentation_by_group(pred, y, action_names(data_path, split.indices), n_cls),
             "hand parts touching": segmentation_by_group(pred, y, parts, n_cls, by_name=True)}
-    fast = wrap(fast_inference(model, check=test.x[:64]))
+    fast = build(lambda m: fast_inference(m, check=test.x[:64]))
     res = evaluate_tensors(fast, test, n_cls)
     if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
-        fast = wrap(fast_inference(model, bf16=False))
+        fast = build(lambda m: fast_inference(m, bf16=False))
         res = evaluate_tensors(fast, test, n_cls)
-    size, prepared = run.model.input_size, wrap(prepare_for_inference(model))
-    ms = {"eval_mode": cpu_ms_per_image(wrap(model), size, threads, time_runs),
-          "prepared": cpu_ms_per_image(prepared, size, threads, time_runs),
+    size = run.model.input_size
+    ms = {"eval_mode": cpu_ms_per_image(model, size, threads, time_runs),
+          "prepared": cpu_ms_per_image(build(prepare_for_inference), size, threads, time_runs),
           "fast": cpu_ms_per_image(fast, size, threads, time_runs),
-          "gpu": gpu_ms_per_image(wrap(model), size)}  # fmt: skip
-    return {"checkpoint": str(ckpt_path), "arch": run.model.arch, "task": run.task,
-            "epoch": ckpt["epoch"], "class_names": list(ckpt.get("class_names", [])),
-            "n_test": len(test.y), "cm": ref.cm.tolist(), "metrics": ref.metrics,
-            "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
-            "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
-            "config": ckpt["config"], "input_size": list(size),
-            "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
-            "init": ckpt.get("init"),
-            "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
-            "by_active_taxels": by_size, "by_contactor": by_contactor,
-            "segmentation_by_group": seg_groups, "tta_views": views}  # fmt: skip
+          "gpu": gpu_ms_per_image(model, size)}  # fmt: skip
+    row = {"checkpoint": str(first.path), "arch": run.model.arch, "task": run.task,
+           "epoch": ckpt["epoch"], "class_names": list(ckpt.get("class_names", [])),
+           "n_test": len(test.y), "cm": ref.cm.tolist(), "metrics": ref.metrics,
+           "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
+           "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
+           "config": ckpt["config"], "input_size": list(size),
+           "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
+           "init": ckpt.get("init"),
+           "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
+           "by_active_taxels": by_size, "by_contactor": by_contactor,
+           "segmentation_by_group": seg_groups, "tta_views": views and views[0]}  # fmt: skip
+    return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
+
+
+def _ensemble_fields(members: list, views: list | None, data_path: str | Path) -> dict:
+    """The fields of an ensemble's row that differ from a single network's: per-member
+    records, no single epoch, seed or config; training data and leakage pooled."""
+    datas = [m.ckpt.get("data") or {} for m in members]
+    same_data = all(d.get("path") == datas[0].get("path") for d in datas)
+    shared = [shared_with_training(d, data_path) for d in datas]
+    worst = max(shared, key=lambda s: -1 if s is None else s["test_samples"])
+    return {
+        "checkpoint": " + ".join(str(m.path) for m in members), "arch": "ensemble",
+        "epoch": None, "seed": None, "config": None, "init": None,
+        "train_data": datas[0] if same_data else None, "shared_with_training": worst,
+        "tta_views": sorted({v for vs in views for v in vs}) if views else None,
+        "members": [{"checkpoint": str(m.path), "arch": m.run.model.arch,
+                     "width": m.ckpt["config"]["model"].get("width"), "epoch": m.ckpt["epoch"],
+                     "seed": m.ckpt.get("seed"), "train_data": d, "init": m.ckpt.get("init"),
+                     "tta_views": views[k] if views else None}
+                    for k, (m, d) in enumerate(zip(members, datas, strict=True))]}  # fmt: skip
 
 
 def tta_views(run, ckpt_path: str | Path) -> list[int]:

@@ -16,7 +16,7 @@ among the segmented pixels within 2 pixels (2 · step_mm) of it on the map, back
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -53,19 +53,29 @@ class Predictor:
             return self.model(torch.from_numpy(x)[None, None])[0].float()
 
 
-def load_predictor(path: str | Path, tta: bool = False) -> Predictor:
+def load_predictor(path: str | Path | Sequence[str | Path], tta: bool = False) -> Predictor:
     """A checkpoint written by ``handskin train``, ready for fast CPU inference; ``tta``: with
     test-time flips over the views it was trained on (`learn.tta.FlipTTA`; its logits are
-    then the log of the mean softmax)."""
+    then the log of the mean softmax). Several checkpoints of one task make an ensemble
+    (`learn.ensemble.MeanSoftmax`: the log of the mean of their softmax outputs), checked
+    alike (task, classes, input size) before any work."""
     from learn.checkpoint import model_from_checkpoint
+    from learn.ensemble import MeanSoftmax, load_members
 
-    ckpt = load_checkpoint(path)
-    model, run = model_from_checkpoint(ckpt)
+    if isinstance(path, str | Path):
+        ckpt = load_checkpoint(path)
+        model, run = model_from_checkpoint(ckpt)
+        members = [(Path(path), ckpt, model, run)]
+    else:
+        members = [(m.path, m.ckpt, m.model, m.run) for m in load_members(path)]
+    nets = []
+    for where, _, model, run in members:
+        fast = fast_inference(model)
+        nets.append(FlipTTA(fast, tta_views(run, where)) if tta else fast)
+    _, ckpt, _, run = members[0]
     names = tuple(ckpt.get("class_names") or ())
-    fast = fast_inference(model)
-    if tta:
-        fast = FlipTTA(fast, tta_views(run, path))
-    return Predictor(fast, run.task, run.model.input_size, names)
+    net = nets[0] if len(nets) == 1 else MeanSoftmax(nets)
+    return Predictor(net, run.task, run.model.input_size, names)
 
 
 @dataclass
@@ -182,19 +192,20 @@ def predict_sample(sample: Sample, clf: Predictor | None = None,
 
 
 def check_inputs(image, frame, map_, data, index, clf, seg, save_labels) -> None:
-    """``handskin predict``'s option combinations (paths or None; ``index`` int or None), checked
-    before any work: ConfigError / DataError naming the option and the fix."""
+    """``handskin predict``'s option combinations (paths or None; ``clf`` and ``seg`` lists of
+    paths or None; ``index`` int or None), checked before any work: ConfigError / DataError
+    naming the option and the fix."""
     if sum(x is not None for x in (image, frame, data)) != 1 or (frame is not None
                                                                and map_ is None):  # fmt: skip
         raise ConfigError("give one input: --image, --frame with --map, or --data with --index")
     if (data is None) != (index is None):
         raise ConfigError("--data and --index go together (a dataset and a sample of it)")
-    if clf is None and seg is None:
+    if not clf and not seg:
         raise ConfigError("give --classifier, --segmenter or both")
-    for path in (clf, seg):
-        if path is not None and not path.is_file():
+    for path in [*(clf or ()), *(seg or ())]:
+        if not path.is_file():
             raise DataError(f"no checkpoint at {path}. Fix: give a .pt file from handskin train")
-    if save_labels is not None and (seg is None or image is not None):
+    if save_labels is not None and (not seg or image is not None):
         raise ConfigError("--save-labels needs --segmenter and a map: --frame with --map, or "
                           "--data with --index (an image alone has no taxels)")
     if save_labels is not None and save_labels.suffix != ".npy":
