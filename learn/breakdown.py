@@ -184,3 +184,28 @@ def segmentation_group_markdown(rows: list[dict], title: str) -> list[str]:
     lines += [f"| {r['group']} | {r['n']} | {100 * r['pixel_accuracy']:.1f} | "
               f"{100 * r['mean_iou']:.1f} |" for r in rows]  # fmt: skip
     return lines
+
+
+def misclassified(
+    pred: np.ndarray, truth: np.ndarray, confidence: np.ndarray, indices: Sequence[int],
+    class_names: Sequence[str], about: dict[str, Sequence] | None = None,
+) -> list[dict[str, object]]:  # fmt: skip
+    """The wrongly classified samples, most confident first: where a classifier is sure and
+    wrong. pred, truth : (S,) int class ids; confidence : (S,) the probability (0..1) the
+    classifier gave its prediction; indices : (S,) dataset sample indices; ``about`` : named
+    (S,) sequences copied into each record (e.g. contactor, active taxels).
+
+    Returns ``{"index", "true", "predicted", "probability", **about}`` dicts.
+    """
+    pred, truth, confidence = (np.asarray(a).ravel() for a in (pred, truth, confidence))
+    wrong = np.flatnonzero(pred != truth)
+    wrong = wrong[np.argsort(-confidence[wrong], kind="stable")]
+    about = about or {}
+    return [{"index": int(indices[k]), "true": class_names[truth[k]],
+             "predicted": class_names[pred[k]], "probability": float(confidence[k]),
+             **{name: _plain(values[k]) for name, values in about.items()}}
+            for k in wrong]  # fmt: skip
+
+
+def _plain(v: object) -> object:
+    return v.item() if isinstance(v, np.generic) else v

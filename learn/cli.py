@@ -202,7 +202,7 @@ def evaluate_command(
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
     from learn.checkpoint import load_checkpoint, versions
     from learn.classical import load_npz
-    from learn.eval_report import write_report
+    from learn.eval_report import save_error_sheets, write_report
     from learn.evaluate import evaluate_checkpoint, evaluate_ensemble, tta_views
     from learn.train import run_from_dict
 
@@ -232,6 +232,8 @@ def evaluate_command(
         if note := leakage_note(row.get("shared_with_training")):
             typer.echo(f"warning: {row['checkpoint']}: {note.replace('**', '')}", err=True)
     header = f"Data: `{data}`. Versions: {json.dumps(versions())}."
+    for path in save_error_sheets(rows, data, report):
+        typer.echo(f"picture written to {path}")
     write_report(rows, report, header)
     report.with_suffix(".json").write_text(json.dumps(rows, indent=1))
     typer.echo(f"report written to {report}")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from learn import metrics as M
@@ -173,7 +174,7 @@ def _details(r: dict, label: str) -> list[str]:
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
             confusion_markdown(torch.tensor(r["cm"]), names), "",
-            *_by_size(r), *_merged(r), *_seg_groups(r)]  # fmt: skip
+            *_by_size(r), *_error_text(r), *_merged(r), *_seg_groups(r)]  # fmt: skip
 
 
 def _members_text(r: dict) -> list[str]:
@@ -251,6 +252,50 @@ def _by_size(r: dict) -> list[str]:
         out += ["Accuracy by contactor (the dataset's `contactor` kind and type), least accurate "
                 "first:", "", *group_markdown(r["by_contactor"]), ""]
     return out
+
+
+#: Tiles on a classifier's sheet of its most confident errors.
+N_ERROR_TILES = 18
+
+
+def save_error_sheets(rows: list[dict], data: str | Path, report: str | Path) -> list[Path]:
+    """For each classifier row with ``errors`` (a handskin dataset), a PNG beside the report of
+    its `N_ERROR_TILES` most confident errors (the stored 1 mm map images, captioned with the
+    truth, the probability given to the wrong class, the contactor and the active taxels);
+    the row's ``error_sheet`` is set to the file name. Returns the files written."""
+    import re
+
+    from tactile.dataset.reader import DatasetReader
+    from tactile.sheet import save_contact_sheet
+
+    report, out = Path(report), []
+    for r, label in zip(rows, row_labels(rows), strict=True):
+        errors = (r.get("errors") or [])[:N_ERROR_TILES]
+        if not errors:
+            continue
+        with DatasetReader(data) as reader:
+            images = np.stack([reader.image[e["index"]] for e in errors])
+        titles = [f"#{e['index']} {e['true']} as {e['predicted']} p {e['probability']:.2f}\n"
+                  f"{str(e.get('contactor', '')).split(': ')[-1]}, "
+                  f"{e.get('active taxels', '?')} taxels" for e in errors]  # fmt: skip
+        slug = re.sub(r"[^A-Za-z0-9]+", "_", label).strip("_")
+        path = report.with_name(f"{report.stem}_errors_{slug}.png")
+        save_contact_sheet(path, images, titles=titles, n_cols=6,
+                           title=f"{label}: its {len(errors)} most confident errors of "
+                                 f"{len(r['errors'])} (test split)")  # fmt: skip
+        r["error_sheet"] = path.name
+        out.append(path)
+    return out
+
+
+def _error_text(r: dict) -> list[str]:
+    """The link to a classifier row's sheet of errors, with the error count."""
+    if not r.get("error_sheet"):
+        return []
+    shown = min(N_ERROR_TILES, len(r["errors"]))
+    return [f"Its {shown} most confident errors of {len(r['errors'])} (sample index, truth, "
+            "probability given to the wrong class, contactor, active taxels):", "",
+            f"![most confident errors]({r['error_sheet']})", ""]  # fmt: skip
 
 
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:

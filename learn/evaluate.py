@@ -32,12 +32,14 @@ CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
 @dataclass
 class EvalResult:
     """Confusion matrix ``cm`` (C, C) int64 (rows true), scores (fractions), mean loss, and the
-    predicted classes ((S,) or (S, h, w) int64) when asked for."""
+    predicted classes ((S,) or (S, h, w) int64) and, for a classifier, the softmax probability
+    of each predicted class ((S,) float32) when asked for."""
 
     cm: torch.Tensor
     metrics: dict[str, float]
     loss: float
     predictions: torch.Tensor | None = None
+    confidence: torch.Tensor | None = None
 
     @property
     def percent(self) -> torch.Tensor:
@@ -68,7 +70,7 @@ def evaluate_tensors(
     0 (`learn.inputs.unpressed_as_background`). ``loss`` is the mean of ``loss_fn`` over
     batches (NaN without a loss function); ``keep_predictions`` also returns the predictions.
     """
-    cms, losses, preds = [], [], []
+    cms, losses, preds, conf = [], [], [], []
     for i in range(0, len(data.y), batch_size):
         x, y = data.x[i : i + batch_size], data.y[i : i + batch_size]
         out = logits_of(model, x, batch_size)
@@ -76,12 +78,14 @@ def evaluate_tensors(
         cms.append(M.confusion_matrix(y, pred, num_classes))
         if keep_predictions:
             preds.append(pred)
+            conf += [out.softmax(1).amax(1)] if y.ndim == 1 else []
         if loss_fn is not None:
             with torch.no_grad():
                 losses.append(float(loss_fn(out, y)) * len(y))
     cm = torch.stack(cms).sum(0)
     loss = sum(losses) / len(data.y) if losses else float("nan")
-    return EvalResult(cm, scores(cm), loss, torch.cat(preds) if preds else None)
+    return EvalResult(cm, scores(cm), loss, torch.cat(preds) if preds else None,
+                      torch.cat(conf) if conf else None)  # fmt: skip
 
 
 class FastInference(nn.Module):
@@ -255,6 +259,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
         action_names,
         active_taxel_counts,
         contactor_types,
+        misclassified,
         parts_in_contact,
         segmentation_by_group,
     )
@@ -279,14 +284,17 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     classify_data = run.task == "classify" and on_dataset
     model = build(lambda m: m)
     ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
-    by_size = by_contactor = seg_groups = None
+    by_size = by_contactor = seg_groups = errors = None
     if classify_data:  # accuracy by contact size and by contactor
         pred = ref.predictions.numpy()
         names = list(ckpt.get("class_names") or [str(c) for c in range(n_cls)])
-        by_size = accuracy_by_active_taxels(pred, test.y.numpy(),
-                                            active_taxel_counts(data_path, split.indices), names)
-        by_contactor = accuracy_by_group(pred, test.y.numpy(),
-                                         contactor_types(data_path, split.indices))
+        n_active = active_taxel_counts(data_path, split.indices)
+        by_size = accuracy_by_active_taxels(pred, test.y.numpy(), n_active, names)
+        contactors = contactor_types(data_path, split.indices)
+        by_contactor = accuracy_by_group(pred, test.y.numpy(), contactors)
+        errors = misclassified(pred, test.y.numpy(), ref.confidence.numpy(), split.indices, names,
+                               {"contactor": contactors, "active taxels": n_active.tolist(),
+                                "action": action_names(data_path, split.indices)})  # fmt: skip
     elif on_dataset:  # segmentation scores by contactor, action and hand parts touching
         pred, y = ref.predictions.numpy(), test.y.numpy()
         parts = [str(k) for k in parts_in_contact(y, n_cls)]
@@ -315,7 +323,8 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "init": ckpt.get("init"),
            "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
            "by_active_taxels": by_size, "by_contactor": by_contactor,
-           "segmentation_by_group": seg_groups, "tta_views": views and views[0]}  # fmt: skip
+           "segmentation_by_group": seg_groups, "errors": errors,
+           "tta_views": views and views[0]}  # fmt: skip
     return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
 
 

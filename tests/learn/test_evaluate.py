@@ -212,3 +212,48 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     # the same width says nothing, so it is left out; the data, then the run folder, follow
     same = row_labels([a, dict(a, checkpoint="/r/c/best.pt")])
     assert same == ["SegNet, hands9k (5,384 train), a", "SegNet, hands9k (5,384 train), c"]
+
+
+def test_errors_most_confident_first_and_their_sheet(checkpoints, tiny_dataset, tmp_path):
+    """A classifier row lists exactly the samples a plain softmax of the model gets wrong, most
+    confident first; `handskin evaluate` draws the sheet of them and links it in the report."""
+    import typer
+    from typer.testing import CliRunner
+
+    from learn.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
+    from learn.cli import register
+    from learn.folder import materialize, open_split
+
+    ckpt = load_checkpoint(checkpoints["handsnet"])  # noisy weights: a classifier that errs
+    gen = torch.Generator().manual_seed(5)
+    ckpt["model"] = {k: v + 0.3 * torch.randn(v.shape, generator=gen) * v.std()
+                     if v.is_floating_point() and v.numel() > 1 else v
+                     for k, v in ckpt["model"].items()}  # fmt: skip
+    noisy = save_checkpoint(ckpt, tmp_path / "noisy" / "best.pt")
+    row = evaluate_checkpoint(noisy, tiny_dataset, time_runs=2)
+    model, run = model_from_checkpoint(load_checkpoint(noisy))
+    split = open_split(tiny_dataset, "test", "classify", run.model.input_size, None,
+                       run.train.seed)  # fmt: skip
+    test = materialize(split, "test", False)
+    with torch.no_grad():
+        p = model(test.x).double().softmax(1).numpy()
+    wrong = np.flatnonzero(p.argmax(1) != test.y.numpy())
+    assert len(wrong) > 0, "the noisy classifier should err on the tiny test split"
+    expected = sorted(wrong, key=lambda k: -p[k].max())
+    assert [e["index"] for e in row["errors"]] == [int(split.indices[k]) for k in expected]
+    np.testing.assert_allclose([e["probability"] for e in row["errors"]],
+                               [p[k].max() for k in expected], rtol=1e-5)  # fmt: skip
+    names = row["class_names"]
+    assert all(e["true"] == names[int(test.y[k])] for e, k in zip(row["errors"], expected,
+                                                                     strict=True))  # fmt: skip
+    app = typer.Typer()
+    register(app)
+    md = tmp_path / "rep" / "r.md"
+    md.parent.mkdir()
+    res = CliRunner().invoke(app, ["evaluate", str(noisy), "--data", str(tiny_dataset),
+                                   "--report", str(md)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    sheet = md.parent / "r_errors_HandsNet.png"
+    assert sheet.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert f"![most confident errors]({sheet.name})" in md.read_text()
+    assert json.loads(md.with_suffix(".json").read_text())[0]["error_sheet"] == sheet.name
