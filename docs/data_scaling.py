@@ -4,12 +4,12 @@
         reports/learning-hands9k.json --png docs/data_scaling.png
 
 Every row of the given report JSON files (``handskin evaluate --report X.md`` writes ``X.json``)
-becomes a point: accuracy (classifiers) or mean IoU (segmenters) in % against the training
-samples its checkpoint records (``train_data.n_train``), one line per method and width (dotted
-with test-time flips), with the paper's published score as a dashed line. Each report scores
-its models on its own dataset's held-out test split, so points of different datasets come from
-different test subjects; a row whose scores are not held out (``shared_with_training``) is
-refused.
+but ensembles (``--ensemble``) becomes a point: accuracy (classifiers) or mean IoU
+(segmenters) in % against the training samples its checkpoint records
+(``train_data.n_train``), one line per method and width (dotted with test-time flips), with
+the paper's published score as a dashed line. Each report scores its models on its own
+dataset's held-out test split, so points of different datasets come from different test
+subjects; a row whose scores are not held out (``shared_with_training``) is refused.
 """
 
 from __future__ import annotations
@@ -39,6 +39,8 @@ def points(paths: list[Path]) -> dict[str, dict[str, list[tuple[int, float, str]
     out: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
     for path in paths:
         for row in json.loads(path.read_text()):
+            if row.get("members"):  # an ensemble (--ensemble): not one network's data scaling
+                continue
             shared = row.get("shared_with_training") or {}
             if shared.get("test_samples"):
                 raise SystemExit(f"{path}: {row['checkpoint']} is scored on subjects it "
