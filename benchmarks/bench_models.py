@@ -6,7 +6,10 @@ Prints, for each registered model at its default width (and any extra ``--widths
 parameter count and the median ms / image with 1 and 2 CPU threads, as built (eval mode) and
 after ``prepare_for_inference`` (batch norm folded, channels-last), against the targets of the
 learning issue (HandsNet ≤ 3 ms, SegNet ≤ 60 ms per image on one CPU core, judged on the
-prepared model). Figures are printed, never asserted: they depend on the machine and its load.
+prepared model). Then the ensemble of the CPU segmenter presets (SegNet and FCN-16s at width
+0.25, the mean of their softmax: ``handskin evaluate --ensemble``), with and without test-time
+flips, prepared, against the same SegNet target. Figures are printed, never asserted: they
+depend on the machine and its load.
 """
 
 from __future__ import annotations
@@ -16,8 +19,10 @@ import inspect
 
 import torch
 
+from learn.ensemble import MeanSoftmax
 from learn.metrics import time_per_image
 from learn.models import MODELS, count_parameters, create_model, prepare_for_inference
+from learn.tta import PAPER_VIEWS, FlipTTA
 
 TARGET_MS_ONE_CORE = {"handsnet": 3.0, "segnet": 60.0}  # from the learning issue
 
@@ -50,6 +55,25 @@ def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int) 
     return f"{arch:9s} {w:>6s} {count_parameters(model):>12,d}{times}{gpu}{verdict}"
 
 
+def bench_ensemble(size: tuple[int, int], runs: int, width: float = 0.25) -> list[str]:
+    """Printed rows: SegNet + FCN-16s (mean softmax) at ``width``, prepared, 1 and 2 threads,
+    without and with test-time flips, against the SegNet target on one core."""
+    members = [prepare_for_inference(create_model(a, width=width).eval())
+               for a in ("segnet", "fcn16s")]  # fmt: skip
+    rows = []
+    for name, net in (("mean", MeanSoftmax(members)),
+                      ("mean+flips", MeanSoftmax([FlipTTA(m, PAPER_VIEWS) for m in members]))):
+        cells = []
+        for threads in (1, 2):
+            torch.set_num_threads(threads)
+            cells.append(1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs))
+        target = TARGET_MS_ONE_CORE["segnet"]
+        rows.append(f"segnet+fcn16s {name:10s} w{width:g}: prep 1 {cells[0]:7.2f}, prep 2 "
+                    f"{cells[1]:7.2f}  target ≤ {target:g}: "
+                    f"{'ok' if cells[0] <= target else 'MISSED'} ({cells[0] / target:.2f} of it)")
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=50, help="timed runs after 10 warm-up runs")
@@ -67,6 +91,9 @@ def main() -> None:
         widths += [] if widths[0] is None else [w for w in args.widths if w != widths[0]]
         for width in widths:
             print(bench_one(arch, width, size, args.runs), flush=True)
+    print("ensemble of the CPU segmenter presets, ms / image:")
+    for row in bench_ensemble(size, args.runs):
+        print(row, flush=True)
 
 
 if __name__ == "__main__":
