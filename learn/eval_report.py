@@ -198,9 +198,11 @@ def _tta_text(r: dict) -> list[str]:
     views = r.get("tta_views")
     if not views:
         return []
+    batch = ("each network runs its views as one batch" if r.get("members")
+             else f"run as one batch of {len(views)} images")  # fmt: skip
     return [f"Test-time flips: scores and times are of the mean softmax over views {views} "
             "(`learn.tta.VIEW_DIMS`: 0 original, 1 columns reversed, 2 rows reversed, 3 both), "
-            f"run as one batch of {len(views)} images.", ""]  # fmt: skip
+            f"{batch}.", ""]  # fmt: skip
 
 
 #: Class groups of the 7-class hand-part segmentation the report also scores, (title, groups).
