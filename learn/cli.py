@@ -260,10 +260,12 @@ MapOpt = _opt(Path | None, "For --frame: a dataset folder (its map; values are r
 PredDataOpt = _opt(Path | None, "A dataset folder: predict its sample --index (the stored "
                    "image; raw counts converted to Pa; the ground truth shown when stored).")
 IndexOpt = _opt(int | None, "Sample of --data (count, 0-based).")
-ClfOpt = _opt(list[Path] | None, "Classifier checkpoint (.pt file); give it again to average "
-              "several networks' softmax (an ensemble, about the sum of their times).")
-SegOpt = _opt(list[Path] | None, "Segmenter checkpoint (.pt file); give it again to average "
-              "several networks' softmax (an ensemble, about the sum of their times).")
+ClfOpt = Annotated[list[Path] | None, typer.Option(metavar="<path>", help=(
+    "Classifier checkpoint (.pt file); give it again to average several networks' softmax (an "
+    "ensemble, about the sum of their times)."))]
+SegOpt = Annotated[list[Path] | None, typer.Option(metavar="<path>", help=(
+    "Segmenter checkpoint (.pt file); give it again to average several networks' softmax (an "
+    "ensemble, about the sum of their times)."))]
 PngOpt = _opt(Path | None, "Write the Figs. 12-13 figure here (PNG, 90 dpi: image, truth when "
               "known, prediction, errors in red) and Fig. 18's per-part bars (kPa, taxel "
               "count) beside it as <stem>_parts.png.")
