@@ -9,16 +9,26 @@ threshold), and the accuracy on each kind of contactor (``kind: type`` from the 
 For a segmenter it adds pixel accuracy and mIoU of each group of test images: by contactor
 (right or left hand), by the dataset's ``action`` and by how many hand parts touch (from the
 label image): finger identity is easy to see on a whole-hand print and not on three fingertips.
+Finally it lists the samples a model gets most wrong: a classifier's errors, most confident
+first, and a segmenter's test images by their own mIoU, lowest first, with the predicted label
+maps of the worst few packed into the JSON row (`pack_labels`) so the report's picture of them
+can be drawn again from the JSON alone.
 """
 
 from __future__ import annotations
 
+import base64
 import json
+import zlib
 from collections.abc import Sequence
 from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
+
+#: A segmenter's worst test images kept in its report row, and how many of them (the first)
+#: carry their predicted label maps for the report's picture.
+N_WORST_KEPT, N_WORST_MAPS = 50, 9
 
 #: Lower edges of the active-taxel bins (count); the last bin is open.
 EDGES: tuple[int, ...] = (0, 10, 20, 40, 80)
@@ -205,6 +215,57 @@ def misclassified(
              "predicted": class_names[pred[k]], "probability": float(confidence[k]),
              **{name: _plain(values[k]) for name, values in about.items()}}
             for k in wrong]  # fmt: skip
+
+
+def worst_segmentations(
+    pred: np.ndarray, truth: np.ndarray, indices: Sequence[int], num_classes: int,
+    about: dict[str, Sequence] | None = None,
+) -> tuple[list[dict[str, object]], np.ndarray]:  # fmt: skip
+    """Every test image scored on its own, lowest mIoU first (ties by pixel accuracy, then
+    test order): where a segmenter fails. pred, truth : (S, h, w) int class ids; indices :
+    (S,) dataset sample indices; ``about`` : named (S,) sequences copied into each record.
+
+    Each image's mIoU and pixel accuracy follow Long et al. on its own confusion matrix:
+    classes absent from its ground truth are skipped in the mean, so a finger painted where
+    none touches costs the IoU of the class it covers. Returns the records
+    ``{"index", "mean_iou", "pixel_accuracy", **about}`` (scores as fractions 0..1) and the
+    (S,) order of test positions they follow.
+    """
+    pred, truth = np.asarray(pred), np.asarray(truth)
+    if pred.shape != truth.shape or pred.ndim != 3:
+        raise ValueError(f"pred {pred.shape} and truth {truth.shape} must be equal (S, h, w)")
+    s, c = len(truth), num_classes
+    codes = (np.arange(s)[:, None] * c * c + truth.reshape(s, -1).astype(np.int64) * c
+             + pred.reshape(s, -1))  # fmt: skip
+    cm = np.bincount(codes.ravel(), minlength=s * c * c).reshape(s, c, c).astype(np.float64)
+    n_ii, t_i, p_i = np.diagonal(cm, axis1=1, axis2=2), cm.sum(2), cm.sum(1)
+    present = t_i > 0
+    iou = np.divide(n_ii, t_i + p_i - n_ii, out=np.zeros_like(n_ii), where=present)
+    miou = (iou * present).sum(1) / present.sum(1)
+    acc = n_ii.sum(1) / t_i.sum(1)
+    order = np.lexsort((np.arange(s), acc, miou))
+    about = about or {}
+    records = [{"index": int(indices[k]), "mean_iou": float(miou[k]),
+                "pixel_accuracy": float(acc[k]),
+                **{name: _plain(values[k]) for name, values in about.items()}}
+               for k in order]  # fmt: skip
+    return records, order
+
+
+def pack_labels(labels: np.ndarray) -> dict[str, object]:
+    """(N, h, w) class ids (0..255) as a JSON-ready dict: shape and zlib-compressed base64
+    bytes (a print's label map is mostly background, so a few kB). `unpack_labels` inverts."""
+    labels = np.asarray(labels)
+    if labels.size and (labels.min() < 0 or labels.max() > 255):
+        raise ValueError("pack_labels: class ids must lie in 0..255")
+    raw = zlib.compress(np.ascontiguousarray(labels, dtype=np.uint8).tobytes(), 9)
+    return {"shape": list(labels.shape), "zlib_base64": base64.b64encode(raw).decode("ascii")}
+
+
+def unpack_labels(packed: dict[str, object]) -> np.ndarray:
+    """The uint8 array of shape ``packed["shape"]`` that `pack_labels` stored."""
+    raw = zlib.decompress(base64.b64decode(str(packed["zlib_base64"])))
+    return np.frombuffer(raw, np.uint8).reshape([int(n) for n in packed["shape"]]).copy()
 
 
 def _plain(v: object) -> object:

@@ -261,43 +261,88 @@ N_ERROR_TILES = 18
 
 
 def save_error_sheets(rows: list[dict], data: str | Path, report: str | Path) -> list[Path]:
-    """For each classifier row with ``errors`` (a handskin dataset), a PNG beside the report of
-    its `N_ERROR_TILES` most confident errors (the stored 1 mm map images, captioned with the
-    truth, the probability given to the wrong class, the contactor and the active taxels);
-    the row's ``error_sheet`` is set to the file name. Returns the files written."""
+    """For each row of a handskin dataset, a PNG beside the report of where the model fails:
+    a classifier's `N_ERROR_TILES` most confident errors (the stored 1 mm map images,
+    captioned with the truth, the probability given to the wrong class, the contactor and the
+    active taxels), a segmenter's worst test images by their own mIoU (its input at the
+    network's size with the true labels, then with its predicted labels). The row's
+    ``error_sheet`` is set to the file name. Returns the files written."""
     import re
-
-    from tactile.dataset.reader import DatasetReader
-    from tactile.sheet import save_contact_sheet
 
     report, out = Path(report), []
     for r, label in zip(rows, row_labels(rows), strict=True):
-        errors = (r.get("errors") or [])[:N_ERROR_TILES]
-        if not errors:
-            continue
-        with DatasetReader(data) as reader:
-            images = np.stack([reader.image[e["index"]] for e in errors])
-        titles = [f"#{e['index']} {e['true']} as {e['predicted']} p {e['probability']:.2f}\n"
-                  f"{str(e.get('contactor', '')).split(': ')[-1]}, "
-                  f"{e.get('active taxels', '?')} taxels" for e in errors]  # fmt: skip
         slug = re.sub(r"[^A-Za-z0-9]+", "_", label).strip("_")
         path = report.with_name(f"{report.stem}_errors_{slug}.png")
-        save_contact_sheet(path, images, titles=titles, n_cols=6,
-                           title=f"{label}: its {len(errors)} most confident errors of "
-                                 f"{len(r['errors'])} (test split)")  # fmt: skip
+        if r.get("errors"):
+            _classifier_sheet(r, label, data, path)
+        elif (r.get("worst") or {}).get("images"):
+            _segmenter_sheet(r, label, data, path)
+        else:
+            continue
         r["error_sheet"] = path.name
         out.append(path)
     return out
 
 
+def _classifier_sheet(r: dict, label: str, data: str | Path, path: Path) -> None:
+    from tactile.dataset.reader import DatasetReader
+    from tactile.sheet import save_contact_sheet
+
+    errors = r["errors"][:N_ERROR_TILES]
+    with DatasetReader(data) as reader:
+        images = np.stack([reader.image[e["index"]] for e in errors])
+    titles = [f"#{e['index']} {e['true']} as {e['predicted']} p {e['probability']:.2f}\n"
+              f"{str(e.get('contactor', '')).split(': ')[-1]}, "
+              f"{e.get('active taxels', '?')} taxels" for e in errors]  # fmt: skip
+    save_contact_sheet(path, images, titles=titles, n_cols=6,
+                       title=f"{label}: its {len(errors)} most confident errors of "
+                             f"{len(r['errors'])} (test split)")  # fmt: skip
+
+
+def _segmenter_sheet(r: dict, label: str, data: str | Path, path: Path) -> None:
+    """Pairs of tiles: truth, then prediction, of the images whose maps the row carries."""
+    from learn.breakdown import unpack_labels
+    from learn.inputs import net_input
+    from tactile.dataset.reader import DatasetReader
+    from tactile.resize import resize_labels
+    from tactile.sheet import save_contact_sheet
+
+    pred = unpack_labels(r["worst"]["maps"])
+    worst = r["worst"]["images"][: len(pred)]
+    size = tuple(r.get("input_size") or r["config"]["model"]["input_size"])
+    with DatasetReader(data) as reader:
+        image = np.stack([reader.image[w["index"]] for w in worst]) / 255.0
+        truth = resize_labels(np.stack([reader.label_image[w["index"]] for w in worst]), size)
+    x = np.round(255 * net_input(image, size, "segment")).astype(np.uint8)
+    titles = []
+    for w in worst:
+        titles += [f"#{w['index']} truth\n{w.get('action', '')}, "
+                   f"{w.get('hand parts touching', '?')} parts",
+                   f"predicted: mIoU {100 * w['mean_iou']:.0f} %\n"
+                   f"pixel accuracy {100 * w['pixel_accuracy']:.0f} %"]  # fmt: skip
+    save_contact_sheet(path, np.repeat(x, 2, axis=0),
+                       labels=np.stack([truth, pred], axis=1).reshape(-1, *size),
+                       titles=titles, n_cols=6,
+                       title=f"{label}: its {len(worst)} test images with the lowest mIoU "
+                             f"(truth, prediction)")  # fmt: skip
+
+
 def _error_text(r: dict) -> list[str]:
-    """The link to a classifier row's sheet of errors, with the error count."""
+    """The link to a row's sheet of where it fails, with the count behind it."""
     if not r.get("error_sheet"):
         return []
-    shown = min(N_ERROR_TILES, len(r["errors"]))
-    return [f"Its {shown} most confident errors of {len(r['errors'])} (sample index, truth, "
-            "probability given to the wrong class, contactor, active taxels):", "",
-            f"![most confident errors]({r['error_sheet']})", ""]  # fmt: skip
+    if r.get("errors"):
+        shown = min(N_ERROR_TILES, len(r["errors"]))
+        return [f"Its {shown} most confident errors of {len(r['errors'])} (sample index, truth, "
+                "probability given to the wrong class, contactor, active taxels):", "",
+                f"![most confident errors]({r['error_sheet']})", ""]  # fmt: skip
+    worst = r["worst"]["images"]
+    shown = r["worst"]["maps"]["shape"][0]
+    listed = ", ".join(f"#{w['index']} ({100 * w['mean_iou']:.0f} %)" for w in worst[:20])
+    return [f"Its {shown} test images with the lowest mIoU of {r['n_test']}, each scored on its "
+            "own (sample index, action, hand parts touching; truth left, prediction right):", "",
+            f"![lowest-mIoU test images]({r['error_sheet']})", "",
+            f"The {min(20, len(worst))} lowest (sample index, mIoU): {listed}.", ""]  # fmt: skip
 
 
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:

@@ -254,14 +254,18 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
                       threads: int, time_runs: int, tta: bool) -> dict:  # fmt: skip
     """The report row of one network or the mean of several (`learn.ensemble.Member` list)."""
     from learn.breakdown import (
+        N_WORST_KEPT,
+        N_WORST_MAPS,
         accuracy_by_active_taxels,
         accuracy_by_group,
         action_names,
         active_taxel_counts,
         contactor_types,
         misclassified,
+        pack_labels,
         parts_in_contact,
         segmentation_by_group,
+        worst_segmentations,
     )
     from learn.ensemble import MeanSoftmax
     from learn.folder import is_dataset, materialize, open_split
@@ -284,7 +288,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     classify_data = run.task == "classify" and on_dataset
     model = build(lambda m: m)
     ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
-    by_size = by_contactor = seg_groups = errors = None
+    by_size = by_contactor = seg_groups = errors = worst = None
     if classify_data:  # accuracy by contact size and by contactor
         pred = ref.predictions.numpy()
         names = list(ckpt.get("class_names") or [str(c) for c in range(n_cls)])
@@ -298,11 +302,16 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     elif on_dataset:  # segmentation scores by contactor, action and hand parts touching
         pred, y = ref.predictions.numpy(), test.y.numpy()
         parts = [str(k) for k in parts_in_contact(y, n_cls)]
+        actions = action_names(data_path, split.indices)
         seg_groups = {
             "contactor": segmentation_by_group(pred, y, contactor_types(data_path, split.indices),
                                                n_cls),
-            "action": segmentation_by_group(pred, y, action_names(data_path, split.indices), n_cls),
+            "action": segmentation_by_group(pred, y, actions, n_cls),
             "hand parts touching": segmentation_by_group(pred, y, parts, n_cls, by_name=True)}
+        worst, order = worst_segmentations(pred, y, split.indices, n_cls,
+                                           {"action": actions, "hand parts touching": parts})
+        worst = {"images": worst[:N_WORST_KEPT],
+                 "maps": pack_labels(pred[order[:N_WORST_MAPS]])}  # fmt: skip
     fast = build(lambda m: fast_inference(m, check=test.x[:64]))
     res = evaluate_tensors(fast, test, n_cls)
     if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
@@ -323,7 +332,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "init": ckpt.get("init"),
            "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
            "by_active_taxels": by_size, "by_contactor": by_contactor,
-           "segmentation_by_group": seg_groups, "errors": errors,
+           "segmentation_by_group": seg_groups, "errors": errors, "worst": worst,
            "tta_views": views and views[0]}  # fmt: skip
     return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
 

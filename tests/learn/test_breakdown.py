@@ -11,9 +11,12 @@ from learn.breakdown import (
     accuracy_by_group,
     breakdown_markdown,
     group_markdown,
+    pack_labels,
     parts_in_contact,
     segmentation_by_group,
     segmentation_group_markdown,
+    unpack_labels,
+    worst_segmentations,
 )
 
 
@@ -102,3 +105,36 @@ def test_parts_in_contact_counts_hand_classes_only():
     truth[1, 0, :3] = [1, 6, 6]  # thumb and palm
     truth[2] = np.arange(16).reshape(4, 4) % 7  # every class
     assert parts_in_contact(truth, 7).tolist() == [0, 2, 6]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_worst_segmentations_per_image_against_pixel_counts(seed):
+    """Each image's score is the pixel-loop reference on that image alone (classes absent from
+    its truth skipped), records run from the lowest mIoU up, and the order indexes them."""
+    rng = np.random.default_rng(seed)
+    k, s = 7, 12
+    truth = rng.integers(0, 3, (s, 6, 8))  # classes 3..6 absent from every truth
+    truth[::3] = rng.integers(0, k, (len(truth[::3]), 6, 8))
+    pred = np.where(rng.random(truth.shape) < 0.4, rng.integers(0, k, truth.shape), truth)
+    pred[5] = truth[5]  # one perfect image
+    indices = rng.permutation(100)[:s]
+    actions = [f"a{i}" for i in range(s)]
+    records, order = worst_segmentations(pred, truth, indices, k, {"action": actions})
+    ref = [_reference_scores(pred[i], truth[i], k) for i in range(s)]
+    assert sorted(order.tolist()) == list(range(s))
+    for rec, i in zip(records, order, strict=True):
+        assert rec["index"] == indices[i] and rec["action"] == actions[i]
+        assert rec["pixel_accuracy"] == pytest.approx(ref[i][0], abs=1e-12)
+        assert rec["mean_iou"] == pytest.approx(ref[i][1], abs=1e-12)
+    mious = [r["mean_iou"] for r in records]
+    assert mious == sorted(mious) and mious[-1] == 1.0 and records[-1]["index"] == indices[5]
+
+
+def test_pack_labels_round_trip_and_range():
+    labels = np.random.default_rng(0).integers(0, 7, (3, 68, 100)).astype(np.int64)
+    packed = pack_labels(labels)
+    assert set(packed) == {"shape", "zlib_base64"} and isinstance(packed["zlib_base64"], str)
+    back = unpack_labels(packed)
+    assert back.dtype == np.uint8 and np.array_equal(back, labels)
+    with pytest.raises(ValueError, match=r"0\.\.255"):
+        pack_labels(np.array([[[256]]]))

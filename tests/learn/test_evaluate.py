@@ -214,15 +214,24 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     assert same == ["SegNet, hands9k (5,384 train), a", "SegNet, hands9k (5,384 train), c"]
 
 
+def _model_and_test_split(ckpt_path, data):
+    """The checkpoint's model, its un-flipped test split and that split in memory."""
+    from learn.checkpoint import load_checkpoint, model_from_checkpoint
+    from learn.folder import materialize, open_split
+
+    model, run = model_from_checkpoint(load_checkpoint(ckpt_path))
+    split = open_split(data, "test", run.task, run.model.input_size, None, run.train.seed)
+    return model, split, materialize(split, "test", False)
+
+
 def test_errors_most_confident_first_and_their_sheet(checkpoints, tiny_dataset, tmp_path):
     """A classifier row lists exactly the samples a plain softmax of the model gets wrong, most
     confident first; `handskin evaluate` draws the sheet of them and links it in the report."""
     import typer
     from typer.testing import CliRunner
 
-    from learn.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
+    from learn.checkpoint import load_checkpoint, save_checkpoint
     from learn.cli import register
-    from learn.folder import materialize, open_split
 
     ckpt = load_checkpoint(checkpoints["handsnet"])  # noisy weights: a classifier that errs
     gen = torch.Generator().manual_seed(5)
@@ -231,10 +240,7 @@ def test_errors_most_confident_first_and_their_sheet(checkpoints, tiny_dataset, 
                      for k, v in ckpt["model"].items()}  # fmt: skip
     noisy = save_checkpoint(ckpt, tmp_path / "noisy" / "best.pt")
     row = evaluate_checkpoint(noisy, tiny_dataset, time_runs=2)
-    model, run = model_from_checkpoint(load_checkpoint(noisy))
-    split = open_split(tiny_dataset, "test", "classify", run.model.input_size, None,
-                       run.train.seed)  # fmt: skip
-    test = materialize(split, "test", False)
+    model, split, test = _model_and_test_split(noisy, tiny_dataset)
     with torch.no_grad():
         p = model(test.x).double().softmax(1).numpy()
     wrong = np.flatnonzero(p.argmax(1) != test.y.numpy())
@@ -256,4 +262,43 @@ def test_errors_most_confident_first_and_their_sheet(checkpoints, tiny_dataset, 
     sheet = md.parent / "r_errors_HandsNet.png"
     assert sheet.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert f"![most confident errors]({sheet.name})" in md.read_text()
+    assert json.loads(md.with_suffix(".json").read_text())[0]["error_sheet"] == sheet.name
+
+
+def test_segmenter_worst_images_and_their_sheet(checkpoints, tiny_dataset, tmp_path):
+    """A segmenter row lists its test images by their own mIoU, lowest first, as recomputed
+    here from a plain forward pass and the confusion-matrix metrics; the row carries the
+    worst images' predicted maps, and `handskin evaluate` draws and links the sheet."""
+    import typer
+    from typer.testing import CliRunner
+
+    from learn.breakdown import unpack_labels
+    from learn.cli import register
+    from learn.metrics import confusion_matrix, mean_iou
+
+    ckpt = checkpoints["segnet"]
+    row = evaluate_checkpoint(ckpt, tiny_dataset, time_runs=2)
+    model, split, test = _model_and_test_split(ckpt, tiny_dataset)
+    with torch.no_grad():
+        pred = (model(test.x).argmax(1) * (test.x[:, 0] > 0)).numpy()
+    y = test.y.numpy()
+    miou = [mean_iou(confusion_matrix(y[k], pred[k], 7)) for k in range(len(y))]
+    images = row["worst"]["images"]
+    assert len(images) == min(len(y), 50)
+    np.testing.assert_allclose([w["mean_iou"] for w in images], sorted(miou)[:len(images)],
+                               atol=1e-12)  # fmt: skip
+    maps = unpack_labels(row["worst"]["maps"])
+    assert len(maps) == min(len(y), 9)
+    for w, m in zip(images, maps, strict=False):  # each map is its image's prediction
+        k = int(np.flatnonzero(split.indices == w["index"])[0])
+        assert np.array_equal(m, pred[k]) and miou[k] == pytest.approx(w["mean_iou"], abs=1e-12)
+    app = typer.Typer()
+    register(app)
+    md = tmp_path / "r.md"
+    res = CliRunner().invoke(app, ["evaluate", str(ckpt), "--data", str(tiny_dataset),
+                                   "--report", str(md)])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    sheet = tmp_path / "r_errors_SegNet.png"
+    assert sheet.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert f"![lowest-mIoU test images]({sheet.name})" in md.read_text()
     assert json.loads(md.with_suffix(".json").read_text())[0]["error_sheet"] == sheet.name
