@@ -179,7 +179,8 @@ def _train_classical(arch, data, out, config, seed, hand, init, epochs, unused, 
 CkptsArg = Annotated[list[Path], typer.Argument(
     help="Checkpoints (.pt files) or classical models (model.npz from --arch bovw / vgg_svm).")]
 EvalDataOpt = _opt(Path, "Dataset folder or image folder (its test split is used).")
-ReportOpt = _opt(Path, "Markdown report to write (.md file; a .json beside it).")
+ReportOpt = _opt(Path, "Markdown report to write (.md file; a .json beside it, and on a handskin "
+                 "dataset a PNG per network of where it fails: <stem>_errors_<model>.png).")
 ThreadsOpt = _opt(int, "CPU threads used for the timing (count).")
 EvalHandOpt = _opt(str | None, "Image folders: hand folder names (default: the checkpoint's).")
 EvalTtaOpt = _opt(bool, "Also score each network (.pt) with test-time flips, in a row of its "
