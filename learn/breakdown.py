@@ -199,22 +199,52 @@ def segmentation_group_markdown(rows: list[dict], title: str) -> list[str]:
 def misclassified(
     pred: np.ndarray, truth: np.ndarray, confidence: np.ndarray, indices: Sequence[int],
     class_names: Sequence[str], about: dict[str, Sequence] | None = None,
+    confidence_name: str = "probability",
 ) -> list[dict[str, object]]:  # fmt: skip
     """The wrongly classified samples, most confident first: where a classifier is sure and
-    wrong. pred, truth : (S,) int class ids; confidence : (S,) the probability (0..1) the
-    classifier gave its prediction; indices : (S,) dataset sample indices; ``about`` : named
-    (S,) sequences copied into each record (e.g. contactor, active taxels).
+    wrong. pred, truth : (S,) int class ids; confidence : (S,) how sure the classifier was of
+    its prediction, larger surer (a network's softmax probability 0..1, an SVM's margin);
+    indices : (S,) dataset sample indices; ``about`` : named (S,) sequences copied into each
+    record (e.g. contactor, active taxels).
 
-    Returns ``{"index", "true", "predicted", "probability", **about}`` dicts.
+    Returns ``{"index", "true", "predicted", confidence_name, **about}`` dicts.
     """
     pred, truth, confidence = (np.asarray(a).ravel() for a in (pred, truth, confidence))
     wrong = np.flatnonzero(pred != truth)
     wrong = wrong[np.argsort(-confidence[wrong], kind="stable")]
     about = about or {}
     return [{"index": int(indices[k]), "true": class_names[truth[k]],
-             "predicted": class_names[pred[k]], "probability": float(confidence[k]),
+             "predicted": class_names[pred[k]], confidence_name: float(confidence[k]),
              **{name: _plain(values[k]) for name, values in about.items()}}
             for k in wrong]  # fmt: skip
+
+
+def classifier_breakdown(
+    data_path: str | Path, indices: np.ndarray, pred: np.ndarray, truth: np.ndarray,
+    confidence: np.ndarray, class_names: Sequence[str], confidence_name: str = "probability",
+) -> dict[str, object]:  # fmt: skip
+    """A classifier's report fields on a handskin dataset's test samples ``indices`` (S,):
+    ``by_active_taxels``, ``by_contactor`` and ``errors`` (most confident first; see
+    `misclassified` for ``confidence`` (S,) and ``confidence_name``)."""
+    n_active = active_taxel_counts(data_path, indices)
+    contactors = contactor_types(data_path, indices)
+    return {
+        "by_active_taxels": accuracy_by_active_taxels(pred, truth, n_active, class_names),
+        "by_contactor": accuracy_by_group(pred, truth, contactors),
+        "errors": misclassified(pred, truth, confidence, indices, class_names,
+                                {"contactor": contactors, "active taxels": n_active.tolist(),
+                                 "action": action_names(data_path, indices)},
+                                confidence_name)}  # fmt: skip
+
+
+def svm_margin(scores: np.ndarray) -> np.ndarray:
+    """How sure a linear SVM is of its prediction, (S,): ``|score|`` of a two-class SVM's
+    (S,) scores, the top score minus the runner-up of (S, C) one-vs-rest scores."""
+    scores = np.asarray(scores, np.float64)
+    if scores.ndim == 1:
+        return np.abs(scores)
+    top2 = np.sort(scores, axis=1)[:, -2:]
+    return top2[:, 1] - top2[:, 0]
 
 
 def worst_segmentations(

@@ -53,8 +53,12 @@ class LinearSvm:
         return scores[:, 0] if len(self.coef) == 1 else scores
 
     def predict(self, features: np.ndarray) -> np.ndarray:
-        """(S,) class ids (LinearSVC's rule: score > 0 for two classes, else the argmax)."""
-        scores = self.decision_function(features)
+        """(S,) class ids of ``features`` (S, D)."""
+        return self.classes_of(self.decision_function(features))
+
+    def classes_of(self, scores: np.ndarray) -> np.ndarray:
+        """(S,) class ids of `decision_function` scores (LinearSVC's rule: score > 0 for two
+        classes, else the argmax)."""
         pick = (scores > 0).astype(np.int64) if scores.ndim == 1 else scores.argmax(axis=1)
         return self.classes[pick]
 
@@ -112,15 +116,18 @@ def load_classical(path: str | Path):
 
 
 def split_images(data: str | Path, split: str, size: tuple[int, int],
-                 hand_classes=None, seed: int = 0, progress: bool = False):  # fmt: skip
+                 hand_classes=None, seed: int = 0, progress: bool = False,
+                 return_indices: bool = False):  # fmt: skip
     """(images (S, h, w) float32 in [0, 1], labels (S,) int64, class names) of ``split`` of a
-    dataset or image folder (the networks' reader: ``learn.folder.open_split``)."""
+    dataset or image folder (the networks' reader: ``learn.folder.open_split``), and with
+    ``return_indices`` the samples' dataset indices (S,) int64 as a fourth item."""
     from learn.folder import HAND_NAMES, materialize, open_split
 
     ds = open_split(Path(data), split, "classify", tuple(size), hand_classes, seed)
     tensors = materialize(ds, split, progress)
     names = tuple(getattr(ds, "class_names", HAND_NAMES))
-    return tensors.x[:, 0].numpy(), tensors.y.numpy().astype(np.int64), names
+    out = tensors.x[:, 0].numpy(), tensors.y.numpy().astype(np.int64), names
+    return (*out, np.asarray(ds.indices, np.int64)) if return_indices else out
 
 
 def confusion(labels: np.ndarray, pred: np.ndarray, n_classes: int) -> np.ndarray:
@@ -232,17 +239,27 @@ def ms_per_image(model, images: np.ndarray, threads: int = 1, n_runs: int = 100,
 def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
                        threads: int = 1, time_runs: int = 100) -> dict:  # fmt: skip
     """Test-split scores and CPU ms/image of a classical model file; a row of
-    ``learn.eval_report.write_report`` (the same keys as ``evaluate_checkpoint``'s)."""
+    ``learn.eval_report.write_report`` (the same keys as ``evaluate_checkpoint``'s; on a
+    handskin dataset, with accuracy by contact size and contactor, and the errors ranked by
+    the SVM's margin, `learn.breakdown.svm_margin`)."""
+    from learn.breakdown import classifier_breakdown, svm_margin
     from learn.evaluate import metrics_from_cm, shared_with_training
+    from learn.folder import is_dataset
 
     model = load_classical(path)
     meta = model.meta
     hand = hand_classes or meta["data"].get("hand_classes")
-    x, y, names = split_images(data, "test", meta["input_size"], hand, meta["seed"])
+    x, y, names, indices = split_images(data, "test", meta["input_size"], hand, meta["seed"],
+                                        return_indices=True)  # fmt: skip
     if list(names) != list(meta["class_names"]):
         raise DataError(f"{data} has classes {list(names)}; {path} was trained on "
                         f"{meta['class_names']}. Fix: the same kind of data (or --hand-classes)")
-    cm = confusion(y, model.predict(x), len(names))
+    scores = model.decision_function(x)
+    pred = model.svm_or_fail().classes_of(scores)
+    found = (classifier_breakdown(data, indices, pred, y, svm_margin(scores), list(names),
+                                  "margin")
+             if is_dataset(data) else {})  # fmt: skip
+    cm = confusion(y, pred, len(names))
     scores = metrics_from_cm(cm)
     ms = ms_per_image(model, x, threads, time_runs)
     return {"checkpoint": str(path), "arch": meta["kind"], "task": "classify", "epoch": None,
@@ -252,4 +269,5 @@ def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
             "threads": threads, "seed": meta["seed"], "config": meta["config"],
             "input_size": meta["input_size"], "train_versions": meta["versions"],
             "train_data": meta.get("data"),
-            "shared_with_training": shared_with_training(meta.get("data"), data)}  # fmt: skip
+            "shared_with_training": shared_with_training(meta.get("data"), data),
+            **found}  # fmt: skip

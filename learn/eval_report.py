@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from learn import metrics as M
+from learn.config import ModelConfig
 from learn.evaluate import (
     ARCH_LABEL,
     PAPER_TABLE3,
@@ -62,10 +63,11 @@ TTA_SUFFIX = " + test-time flips"
 
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
-    test-time flips); where two rows would share a label, the width multiplier (when theirs
-    differ), then the training data, then the run folder, added."""
+    test-time flips); where two rows would share a label, the input size, then the width
+    multiplier (each when theirs differ), then the training data, then the run folder, added."""
     labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
-    for extra, only_if_differs in ((lambda r: width_label(r) or "default width", True),
+    for extra, only_if_differs in ((size_label, True),
+                                   (lambda r: width_label(r) or "default width", True),
                                    (_data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False)):
         groups: dict[str, set[str]] = {}
@@ -83,6 +85,13 @@ def method_label(r: dict) -> str:
     if r.get("members"):
         return "mean of " + " + ".join(ARCH_LABEL.get(m["arch"], m["arch"]) for m in r["members"])
     return ARCH_LABEL.get(r["arch"], r["arch"])
+
+
+def size_label(r: dict) -> str:
+    """``<h> x <w> px``, a report row's network input size."""
+    model = (r.get("config") or {}).get("model") or {}
+    h, w = r.get("input_size") or model.get("input_size") or ModelConfig().input_size
+    return f"{h} x {w} px"
 
 
 def width_label(r: dict) -> str | None:
@@ -263,9 +272,9 @@ N_ERROR_TILES = 18
 def save_error_sheets(rows: list[dict], data: str | Path, report: str | Path) -> list[Path]:
     """For each row of a handskin dataset, a PNG beside the report of where the model fails:
     a classifier's `N_ERROR_TILES` most confident errors (the stored 1 mm map images,
-    captioned with the truth, the probability given to the wrong class, the contactor and the
-    active taxels), a segmenter's worst test images by their own mIoU (its input at the
-    network's size with the true labels, then with its predicted labels). The row's
+    captioned with the truth, the probability given to the wrong class (an SVM's margin), the
+    contactor and the active taxels), a segmenter's worst test images by their own mIoU (its
+    input at the network's size with the true labels, then with its predicted labels). The row's
     ``error_sheet`` is set to the file name. Returns the files written."""
     import re
 
@@ -291,12 +300,19 @@ def _classifier_sheet(r: dict, label: str, data: str | Path, path: Path) -> None
     errors = r["errors"][:N_ERROR_TILES]
     with DatasetReader(data) as reader:
         images = np.stack([reader.image[e["index"]] for e in errors])
-    titles = [f"#{e['index']} {e['true']} as {e['predicted']} p {e['probability']:.2f}\n"
+    titles = [f"#{e['index']} {e['true']} as {e['predicted']} {_confidence(e)}\n"
               f"{str(e.get('contactor', '')).split(': ')[-1]}, "
               f"{e.get('active taxels', '?')} taxels" for e in errors]  # fmt: skip
     save_contact_sheet(path, images, titles=titles, n_cols=6,
                        title=f"{label}: its {len(errors)} most confident errors of "
                              f"{len(r['errors'])} (test split)")  # fmt: skip
+
+
+def _confidence(error: dict) -> str:
+    """``p 0.93`` (a network's softmax probability) or ``margin 1.20`` (an SVM's)."""
+    if "probability" in error:
+        return f"p {error['probability']:.2f}"
+    return f"margin {error['margin']:.2f}"
 
 
 def _segmenter_sheet(r: dict, label: str, data: str | Path, path: Path) -> None:
@@ -333,8 +349,10 @@ def _error_text(r: dict) -> list[str]:
         return []
     if r.get("errors"):
         shown = min(N_ERROR_TILES, len(r["errors"]))
+        sure = ("SVM margin" if "margin" in r["errors"][0]
+                else "probability given to the wrong class")
         return [f"Its {shown} most confident errors of {len(r['errors'])} (sample index, truth, "
-                "probability given to the wrong class, contactor, active taxels):", "",
+                f"{sure}, contactor, active taxels):", "",
                 f"![most confident errors]({r['error_sheet']})", ""]  # fmt: skip
     worst = r["worst"]["images"]
     shown = r["worst"]["maps"]["shape"][0]

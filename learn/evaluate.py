@@ -256,12 +256,9 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     from learn.breakdown import (
         N_WORST_KEPT,
         N_WORST_MAPS,
-        accuracy_by_active_taxels,
-        accuracy_by_group,
         action_names,
-        active_taxel_counts,
+        classifier_breakdown,
         contactor_types,
-        misclassified,
         pack_labels,
         parts_in_contact,
         segmentation_by_group,
@@ -288,17 +285,12 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     classify_data = run.task == "classify" and on_dataset
     model = build(lambda m: m)
     ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
-    by_size = by_contactor = seg_groups = errors = worst = None
-    if classify_data:  # accuracy by contact size and by contactor
-        pred = ref.predictions.numpy()
+    seg_groups = worst = None
+    found = dict.fromkeys(("by_active_taxels", "by_contactor", "errors"))
+    if classify_data:  # accuracy by contact size and by contactor, most confident errors
         names = list(ckpt.get("class_names") or [str(c) for c in range(n_cls)])
-        n_active = active_taxel_counts(data_path, split.indices)
-        by_size = accuracy_by_active_taxels(pred, test.y.numpy(), n_active, names)
-        contactors = contactor_types(data_path, split.indices)
-        by_contactor = accuracy_by_group(pred, test.y.numpy(), contactors)
-        errors = misclassified(pred, test.y.numpy(), ref.confidence.numpy(), split.indices, names,
-                               {"contactor": contactors, "active taxels": n_active.tolist(),
-                                "action": action_names(data_path, split.indices)})  # fmt: skip
+        found = classifier_breakdown(data_path, split.indices, ref.predictions.numpy(),
+                                     test.y.numpy(), ref.confidence.numpy(), names)  # fmt: skip
     elif on_dataset:  # segmentation scores by contactor, action and hand parts touching
         pred, y = ref.predictions.numpy(), test.y.numpy()
         parts = [str(k) for k in parts_in_contact(y, n_cls)]
@@ -331,8 +323,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
            "init": ckpt.get("init"),
            "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
-           "by_active_taxels": by_size, "by_contactor": by_contactor,
-           "segmentation_by_group": seg_groups, "errors": errors, "worst": worst,
+           **found, "segmentation_by_group": seg_groups, "worst": worst,
            "tta_views": views and views[0]}  # fmt: skip
     return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
 

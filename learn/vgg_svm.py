@@ -110,23 +110,24 @@ class VggSvmClassifier:
         self.svm = LinearSvm.from_sklearn(svc.fit(self._scaled(feats), np.asarray(labels)))
         return self
 
-    def _fitted(self) -> LinearSvm:
+    def svm_or_fail(self) -> LinearSvm:
+        """The fitted SVM (DataError before ``fit``)."""
         if self.svm is None:
             raise DataError("VggSvmClassifier: call fit() before predict()")
         return self.svm
 
     def decision_function(self, images: Images) -> np.ndarray:
         """SVM scores: ``(N,)`` for two classes, ``(N, C)`` otherwise."""
-        return self._fitted().decision_function(self._scaled(self.features(images)))
+        return self.svm_or_fail().decision_function(self._scaled(self.features(images)))
 
     def predict(self, images: Images) -> np.ndarray:
         """``(N,)`` predicted labels."""
-        return self._fitted().predict(self._scaled(self.features(images)))
+        return self.svm_or_fail().predict(self._scaled(self.features(images)))
 
     def to_arrays(self) -> tuple[dict, dict[str, np.ndarray]]:
         """(configuration: VggSvmConfig fields and the network's run config; arrays: the SVM,
         ``mean`` / ``scale`` (D,) and the network's weights as ``vgg.<state-dict name>``)."""
-        svm = self._fitted()
+        svm = self.svm_or_fail()
         weights = {f"vgg.{k}": v.detach().cpu().numpy() for k, v in self.model.state_dict().items()}
         cfg = {**asdict(self.cfg), "seed": self.seed, "vgg_run": self.run_config}
         return cfg, {"mean": self.mean, "scale": self.scale, **svm.arrays(), **weights}

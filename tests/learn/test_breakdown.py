@@ -138,3 +138,16 @@ def test_pack_labels_round_trip_and_range():
     assert back.dtype == np.uint8 and np.array_equal(back, labels)
     with pytest.raises(ValueError, match=r"0\.\.255"):
         pack_labels(np.array([[[256]]]))
+
+
+def test_svm_margin_against_a_loop():
+    """Two classes: |score|; one-vs-rest: the top score less the runner-up, by a plain loop."""
+    from learn.breakdown import svm_margin
+
+    np.testing.assert_array_equal(svm_margin(np.array([-2.0, 0.5, 0.0])), [2.0, 0.5, 0.0])
+    scores = np.random.default_rng(3).normal(size=(20, 4))
+    ref = []
+    for row in scores:
+        best = max(range(4), key=lambda c: row[c])
+        ref.append(row[best] - max(row[c] for c in range(4) if c != best))
+    np.testing.assert_allclose(svm_margin(scores), ref)

@@ -20,7 +20,7 @@ from learn.classical import (
     train_classical,
 )
 from learn.config import VggSvmConfig
-from learn.eval_report import write_report
+from learn.eval_report import save_error_sheets, write_report
 from learn.evaluate import (
     confusion_markdown,
     evaluate_checkpoint,
@@ -185,6 +185,19 @@ def test_vgg_svm_train_save_load_evaluate(vgg16_checkpoint, checkpoints, tiny_da
     assert f"| VGG16 + SVM | {acc:.2f} | {row['ms_per_image']['fast']:.2f} | unknown |" in text
     assert "| HandsNet | " in text and "| BoVW | not run |" in text
     assert json.loads((out / "test_metrics.json").read_text())["seed"] == 1
+    # errors ranked by the SVM's own margin |score|, and the tables by contact size and contactor
+    *_, indices = split_images(tiny_dataset, "test", (32, 48), return_indices=True)
+    score, pred = fresh.decision_function(x), fresh.predict(x)
+    wrong = sorted(np.flatnonzero(pred != y), key=lambda k: -abs(score[k]))
+    assert len(wrong) > 1, "the one-epoch features should leave the SVM some errors to rank"
+    assert [e["index"] for e in row["errors"]] == [int(indices[k]) for k in wrong]
+    np.testing.assert_allclose([e["margin"] for e in row["errors"]],
+                               [abs(score[k]) for k in wrong], rtol=1e-6)  # fmt: skip
+    assert sum(b["n"] for b in row["by_contactor"]) == len(y)
+    assert sum(b["n"] for b in row["by_active_taxels"]) == len(y)
+    (sheet,) = save_error_sheets([row], tiny_dataset, tmp_path / "svm.md")
+    assert sheet.name == "svm_errors_VGG16_SVM.png" and sheet.read_bytes()[:4] == b"\x89PNG"
+    assert "SVM margin" in write_report([row], tmp_path / "svm.md").read_text()
 
 
 def test_vgg_svm_needs_a_vgg16_checkpoint(checkpoints, tiny_dataset, tmp_path):
@@ -212,6 +225,12 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     # the same width says nothing, so it is left out; the data, then the run folder, follow
     same = row_labels([a, dict(a, checkpoint="/r/c/best.pt")])
     assert same == ["SegNet, hands9k (5,384 train), a", "SegNet, hands9k (5,384 train), c"]
+    # input size comes first: a row without one recorded has the model's default (68, 100)
+    big = dict(a, config={"model": {"width": 0.25, "input_size": [136, 200]}})
+    assert row_labels([a, big, dict(big, tta_views=[0, 1, 2])]) == [
+        "SegNet, 68 x 100 px", "SegNet, 136 x 200 px", "SegNet + test-time flips"]
+    # a size both rows share says nothing, like a shared width
+    assert row_labels([dict(b, input_size=[136, 200]), big]) == ["SegNet, w0.5", "SegNet, w0.25"]
 
 
 def _model_and_test_split(ckpt_path, data):
