@@ -59,6 +59,16 @@ def _check_data(data: Path) -> None:
         )
 
 
+def _check_out(out: Path) -> None:
+    """Refuse a run folder that is, or lies under, an existing file, before any work."""
+    for p in (out, *out.parents):
+        if p.exists():
+            if not p.is_dir():
+                raise ConfigError(f"--out {out}: {p} is a file, not a folder. Fix: give a folder "
+                                  "path (created if missing)")  # fmt: skip
+            return
+
+
 def _fit_classes(run, data):
     """Classification on a folder keeping every class: num_classes follows the folders."""
     n = len(data.class_names)
@@ -121,6 +131,7 @@ def train_command(
     """Train a model; best.pt / last.pt, curves.png, run.toml and test_metrics.json in OUT."""
     try:
         _check_data(data)
+        _check_out(out)
         if init is not None and not init.is_file():
             raise DataError(f"no checkpoint at {init}. Fix: give a .pt file from handskin train")
         if arch in CLASSICAL:

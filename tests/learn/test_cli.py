@@ -62,6 +62,8 @@ def test_train_evaluate_predict(app, tiny_dataset, small_config, checkpoints, tm
         (["train", "{data}", "--out", "{out}", "--arch", "resnet"], "unknown arch 'resnet'"),
         (["train", "{data}", "--out", "{out}", "--config", "{bad}"], "key 'train.learning_rate'"),
         (["evaluate", "{out}/none.pt", "--data", "{data}"], "no checkpoint"),
+        (["train", "{data}", "--out", "{bad}"], "bad.toml is a file, not a folder"),
+        (["train", "{data}", "--out", "{bad}/run", "--arch", "bovw"], "is a file, not a folder"),
         (["predict", "--frame", "{bad}"], "--frame with --map"),
     ],
 )
@@ -72,3 +74,4 @@ def test_errors_before_work(app, tiny_dataset, tmp_path, args, message):
     res = runner.invoke(app, [a.format(**fill) for a in args])
     assert res.exit_code == 2 and message in res.output, res.output
     assert not (tmp_path / "out").exists()  # nothing written
+    assert bad.read_text() == "[train]\nlearning_rate = 0.1\n"  # nor overwritten
