@@ -30,7 +30,7 @@ import numpy as np
 from handskin import fidelity_data as FD
 from handskin import fidelity_report as FR
 from handskin import fidelity_settings as FS
-from tactile.errors import ConfigError
+from tactile.errors import ConfigError, require_folder
 
 if TYPE_CHECKING:
     from torch import nn
@@ -179,8 +179,7 @@ def run_fidelity(out: str | Path, *, data_dir: str | Path | None = None,
     out = Path(out)
     data = Path(data_dir) if data_dir is not None else out / "data"
     for path, what in ((out, "--out"), (data, "--data")):
-        if path.exists() and not path.is_dir():
-            raise ConfigError(f"{what} {path} is a file; give a folder")
+        require_folder(path, what)
     return _run(out, data, plan, chosen, configs, quick, progress)
 
 

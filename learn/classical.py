@@ -254,9 +254,9 @@ def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
     if list(names) != list(meta["class_names"]):
         raise DataError(f"{data} has classes {list(names)}; {path} was trained on "
                         f"{meta['class_names']}. Fix: the same kind of data (or --hand-classes)")
-    scores = model.decision_function(x)
-    pred = model.svm_or_fail().classes_of(scores)
-    found = (classifier_breakdown(data, indices, pred, y, svm_margin(scores), list(names),
+    svm_scores = model.decision_function(x)
+    pred = model.svm_or_fail().classes_of(svm_scores)
+    found = (classifier_breakdown(data, indices, pred, y, svm_margin(svm_scores), list(names),
                                   "margin")
              if is_dataset(data) else {})  # fmt: skip
     cm = confusion(y, pred, len(names))

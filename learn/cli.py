@@ -15,7 +15,7 @@ from typing import Annotated
 
 import typer
 
-from tactile.errors import ConfigError, DataError, HandskinError
+from tactile.errors import ConfigError, DataError, HandskinError, require_folder
 
 PRESETS = ("handsnet", "vgg16", "segnet", "fcn16s")
 CLASSICAL = ("bovw", "vgg_svm")  # as learn.classical.CLASSICAL (not imported: keeps --help fast)
@@ -57,16 +57,6 @@ def _check_data(data: Path) -> None:
             f"no dataset or image folder at {data}. Fix: give a dataset folder "
             "(holding dataset.h5) or a folder of class sub-folders of images"
         )
-
-
-def _check_out(out: Path) -> None:
-    """Refuse a run folder that is, or lies under, an existing file, before any work."""
-    for p in (out, *out.parents):
-        if p.exists():
-            if not p.is_dir():
-                raise ConfigError(f"--out {out}: {p} is a file, not a folder. Fix: give a folder "
-                                  "path (created if missing)")  # fmt: skip
-            return
 
 
 def _fit_classes(run, data):
@@ -131,7 +121,7 @@ def train_command(
     """Train a model; best.pt / last.pt, curves.png, run.toml and test_metrics.json in OUT."""
     try:
         _check_data(data)
-        _check_out(out)
+        require_folder(out)
         if init is not None and not init.is_file():
             raise DataError(f"no checkpoint at {init}. Fix: give a .pt file from handskin train")
         if arch in CLASSICAL:

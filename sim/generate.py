@@ -22,7 +22,7 @@ import numpy as np
 from tqdm import tqdm
 
 from sim.gen_config import GenerateConfig, generator_version, refuse_other_code
-from tactile.errors import ConfigError
+from tactile.errors import ConfigError, require_folder
 
 Sample = dict[str, np.ndarray]
 ChunkResult = tuple[int, list[Sample], dict[str, int]]
@@ -105,9 +105,8 @@ def progress_bar(total: int, initial: int, desc: str, enabled: bool = True) -> P
 
 
 def out_dir_is_free(out: Path) -> None:
-    """Refuse an output path that is a file, before any work starts."""
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out {out} is a file; give a folder (new, or a dataset to resume)")
+    """Refuse an output path that is, or lies under, a file, before any work starts."""
+    require_folder(out, fix="give a folder (new, or a dataset to resume)")
 
 
 # ------------------------------------------------------------------ the generation run

@@ -6,6 +6,8 @@ message names the problem and the fix.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 
 class HandskinError(Exception):
     """Base class of every error handskin raises on purpose."""
@@ -25,3 +27,14 @@ class ConfigError(HandskinError, ValueError):
 
 class DataError(HandskinError, ValueError):
     """A dataset or recording on disk is malformed, incompatible or from another configuration."""
+
+
+def require_folder(path: Path, what: str = "--out",
+                   fix: str = "give a folder path (created if missing)") -> None:  # fmt: skip
+    """Refuse an output folder that is, or lies under, an existing file (ConfigError naming the
+    file and ``fix``), before any work starts."""
+    for p in (path, *path.parents):
+        if p.exists():
+            if not p.is_dir():
+                raise ConfigError(f"{what} {path}: {p} is a file, not a folder. Fix: {fix}")
+            return
