@@ -295,8 +295,9 @@ def predict_command(
     threshold_pa: ThresholdOpt = None,
     tta: PredTtaOpt = False,
 ) -> None:
-    """Class + probability, segmentation, per-taxel labels, per-part taxel count and mean
-    pressure; the Figs. 12-13 and Fig. 18 pictures; the per-taxel labels for handskin view."""
+    """Class + probability, segmentation, per-taxel labels, per-part taxels and mean pressure.
+
+    Figs. 12-13 and 18 pictures with --png; labels for handskin view with --save-labels."""
     import numpy as np
 
     from learn import predict as P

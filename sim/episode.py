@@ -39,6 +39,7 @@ from sim.episode_frames import (
     sensed_pressure,
     tactile_images,
 )
+from sim.mjlog import mujoco_warnings_logged
 from sim.parts import Part, get_part
 from sim.skin import SkinConfig, SkinInstance
 from tactile.errors import ConfigError
@@ -161,13 +162,14 @@ def run_episode(
     per_frame = round(FRAME_DT_S / CONTROL_DT_S)
     sched = press.schedule(scene, plan, np.arange(n_frames * per_frame) * CONTROL_DT_S)
     frames: list[Frame] = []
-    for k in range(n_frames):
-        try:
-            frames.append(_step_frame(ctx, scene, sched, k, contactor.max_penetration_m))
-        except EpisodeFailure:
-            if k < n_hold:
-                raise
-            break
+    with mujoco_warnings_logged():  # _check rejects them; no stderr line, no MUJOCO_LOG.TXT
+        for k in range(n_frames):
+            try:
+                frames.append(_step_frame(ctx, scene, sched, k, contactor.max_penetration_m))
+            except EpisodeFailure:
+                if k < n_hold:
+                    raise
+                break
     return Frames(frames, n_hold)
 
 

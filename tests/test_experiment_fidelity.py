@@ -20,7 +20,7 @@ from handskin import fidelity_settings as FS
 from handskin.fidelity import run_fidelity
 from tactile.errors import ConfigError
 
-SETTINGS = ["cheapest", "default", "sequences"]
+SETTINGS = ["cheapest", "default", "sequences", "solver_1"]  # solver_1: MuJoCo warns
 KW = {"n": 16, "epochs": 2, "image_px": (32, 48), "workers": 1, "seed": 5}
 
 
@@ -39,7 +39,9 @@ def run(tmp_path_factory):
 
     torch.set_num_threads(1)
     out = tmp_path_factory.mktemp("fidelity") / "out"
-    results = run_fidelity(out, settings=SETTINGS, base=tiny_base(), progress=False, **KW)
+    with pytest.MonkeyPatch.context() as mp:  # in its own cwd: see the MUJOCO_LOG.TXT test
+        mp.chdir(out.parent)
+        results = run_fidelity(out, settings=SETTINGS, base=tiny_base(), progress=False, **KW)
     return out, results
 
 
@@ -111,6 +113,20 @@ def test_each_dataset_was_made_with_its_setting(run):
     rich = FS.BY_NAME[FS.RICHEST].changes["episode.timestep_s"]
     assert test_cfg["episode"]["timestep_s"] == rich
     assert (test_cfg["seed"], test_cfg["n"]) == (KW["seed"], KW["n"])
+
+
+def test_unstable_attempts_are_rejected_without_a_mujoco_log_file(run):
+    """With one solver iteration some presses go unstable (MuJoCo warns; the attempt is retried
+    with a new seed): the warnings are counted as rejects and leave no MUJOCO_LOG.TXT behind."""
+    from tactile.dataset.reader import open_dataset
+
+    out, results = run
+    warned = 0
+    for row in [*results["settings"], results["test_set"]]:
+        with open_dataset(row["dataset"]) as ds:
+            warned += ds.attrs["rejects"].get("warning", 0)
+    assert warned > 0
+    assert not (out.parent / "MUJOCO_LOG.TXT").exists()
 
 
 def test_storing_sequences_changes_no_image_and_no_accuracy(run):
