@@ -28,6 +28,7 @@ def mujoco_warnings_logged() -> Iterator[None]:
 
     Uses MuJoCo's warning hook (``mju_user_warning``), which its default log handler calls
     instead of printing and writing the file. Errors are untouched (the bindings raise them).
+    The hook is process-wide, not per thread: generation's workers are processes.
     """
     previous = mujoco.get_mju_user_warning()
     mujoco.set_mju_user_warning(_to_log)
