@@ -5,10 +5,12 @@ A touch that presses a handful of taxels carries little shape; the paper reports
 over all images. ``handskin evaluate`` adds, for a handskin dataset, the accuracy of each true
 class within bins of the number of active taxels (pressure above the dataset's active
 threshold), and the accuracy on each kind of contactor (``kind: type`` from the dataset's
-``contactor`` JSON, e.g. ``object: rake``), so a user sees which contacts cost the accuracy.
-For a segmenter it adds pixel accuracy and mIoU of each group of test images: by contactor
-(right or left hand), by the dataset's ``action`` and by how many hand parts touch (from the
-label image): finger identity is easy to see on a whole-hand print and not on three fingertips.
+``contactor`` JSON, e.g. ``object: rake``), so a user sees which contacts cost the accuracy;
+and for the hand samples, the accuracy by the hand parts that press (a palm alone looks like a
+flat object) and by action. For a segmenter it adds pixel accuracy and mIoU of each group of
+test images: by contactor (right or left hand), by the dataset's ``action`` and by how many
+hand parts touch (from the label image): finger identity is easy to see on a whole-hand print
+and not on three fingertips.
 Finally it lists the samples a model gets most wrong: a classifier's errors, most confident
 first, and a segmenter's test images by their own mIoU, lowest first, with the predicted label
 maps of the worst few packed into the JSON row (`pack_labels`) so the report's picture of them
@@ -131,9 +133,64 @@ def contactor_types(data_path: str | Path, indices: np.ndarray) -> list[str]:
     return out
 
 
-def group_markdown(rows: list[dict]) -> list[str]:
-    """A markdown table of :func:`accuracy_by_group` (accuracy in %)."""
-    lines = ["| contactor | samples | errors | accuracy % |", "|---|---|---|---|"]
+#: Groups of hand samples by the hand parts that press (`hand_parts_group`), in table order.
+HAND_PART_GROUPS: tuple[str, ...] = ("no part", "palm only", "one finger", "palm + one finger",
+                                     "two fingers", "3 parts", "4 parts", "5 parts", "6 parts")
+
+
+def hand_parts_group(parts: set[int] | frozenset[int], palm: int = 6) -> str:
+    """The `HAND_PART_GROUPS` name of a hand sample whose active taxels carry the hand-part
+    class ids ``parts`` (1..6, ``palm`` the palm's; 0 "none" ignored): a palm alone or one
+    finger carries little of a hand's shape, a print of several parts more."""
+    parts = set(parts) - {0}
+    k, has_palm = len(parts), palm in parts
+    if k == 0:
+        return "no part"
+    if k == 1:
+        return "palm only" if has_palm else "one finger"
+    if k == 2:
+        return "palm + one finger" if has_palm else "two fingers"
+    return f"{k} parts"
+
+
+def hand_parts_groups(data_path: str | Path, indices: np.ndarray) -> list[str | None]:
+    """`hand_parts_group` of each of samples ``indices`` (S,) of a handskin dataset from the
+    ``taxel_label`` of its active taxels (pressure above the dataset's active threshold);
+    None for a non-hand sample, ``"unknown"`` for all when the dataset has no ``taxel_label``
+    or ``is_hand``."""
+    from learn.predict import active_threshold_pa
+    from tactile import CLASS_NAMES
+    from tactile.dataset.reader import DatasetReader
+
+    with DatasetReader(data_path) as reader:
+        if not {"taxel_label", "is_hand"} <= set(reader.fields):
+            return ["unknown"] * len(indices)
+        order = np.argsort(indices)
+        rows = np.asarray(indices)[order]
+        active = reader.pressure_pa[rows] > active_threshold_pa(reader)
+        labels, hand = reader["taxel_label"][rows], reader["is_hand"][rows]
+    palm, out = CLASS_NAMES.index("palm"), [None] * len(indices)
+    for pos, lab, act, h in zip(order, labels, active, hand, strict=True):
+        out[pos] = hand_parts_group(set(lab[act].tolist()), palm) if h else None
+    return out
+
+
+def hands_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[str | None],
+                   order: Sequence[str] | None = None) -> list[dict[str, object]]:  # fmt: skip
+    """`accuracy_by_group` over the samples whose group is not None (hand samples); rows in
+    ``order`` (groups not in it last) or, without ``order``, least accurate first."""
+    keep = np.flatnonzero([g is not None for g in groups])
+    rows = accuracy_by_group(np.asarray(pred).ravel()[keep], np.asarray(truth).ravel()[keep],
+                             [groups[k] for k in keep]) if len(keep) else []  # fmt: skip
+    if order is not None:
+        rank = {g: i for i, g in enumerate(order)}
+        rows.sort(key=lambda r: (rank.get(r["group"], len(rank)), r["group"]))
+    return rows
+
+
+def group_markdown(rows: list[dict], title: str = "contactor") -> list[str]:
+    """A markdown table of :func:`accuracy_by_group` (accuracy in %), first column ``title``."""
+    lines = [f"| {title} | samples | errors | accuracy % |", "|---|---|---|---|"]
     lines += [f"| {r['group']} | {r['n']} | {r['errors']} | {100 * r['accuracy']:.1f} |"
               for r in rows]  # fmt: skip
     return lines
@@ -224,16 +281,23 @@ def classifier_breakdown(
     confidence: np.ndarray, class_names: Sequence[str], confidence_name: str = "probability",
 ) -> dict[str, object]:  # fmt: skip
     """A classifier's report fields on a handskin dataset's test samples ``indices`` (S,):
-    ``by_active_taxels``, ``by_contactor`` and ``errors`` (most confident first; see
-    `misclassified` for ``confidence`` (S,) and ``confidence_name``)."""
+    ``by_active_taxels``, ``by_contactor``, the hand samples' accuracy by the hand parts that
+    press (``hands_by_parts``, in `HAND_PART_GROUPS` order) and by action (``hands_by_action``,
+    least accurate first), and ``errors`` (most confident first; see `misclassified` for
+    ``confidence`` (S,) and ``confidence_name``)."""
     n_active = active_taxel_counts(data_path, indices)
     contactors = contactor_types(data_path, indices)
+    actions = action_names(data_path, indices)
+    parts = hand_parts_groups(data_path, indices)
+    hand_actions = [a if p is not None else None for a, p in zip(actions, parts, strict=True)]
     return {
         "by_active_taxels": accuracy_by_active_taxels(pred, truth, n_active, class_names),
         "by_contactor": accuracy_by_group(pred, truth, contactors),
+        "hands_by_parts": hands_by_group(pred, truth, parts, HAND_PART_GROUPS),
+        "hands_by_action": hands_by_group(pred, truth, hand_actions),
         "errors": misclassified(pred, truth, confidence, indices, class_names,
                                 {"contactor": contactors, "active taxels": n_active.tolist(),
-                                 "action": action_names(data_path, indices)},
+                                 "action": actions, "hand parts": parts},
                                 confidence_name)}  # fmt: skip
 
 

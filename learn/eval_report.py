@@ -262,6 +262,12 @@ def _by_size(r: dict) -> list[str]:
     if r.get("by_contactor"):
         out += ["Accuracy by contactor (the dataset's `contactor` kind and type), least accurate "
                 "first:", "", *group_markdown(r["by_contactor"]), ""]
+    if r.get("hands_by_parts"):
+        out += ["Accuracy on the hand samples by the hand parts that press (the labels of their "
+                "active taxels):", "", *group_markdown(r["hands_by_parts"], "hand parts"), ""]
+    if r.get("hands_by_action"):
+        out += ["Accuracy on the hand samples by action, least accurate first:", "",
+                *group_markdown(r["hands_by_action"], "action"), ""]
     return out
 
 
@@ -302,7 +308,9 @@ def _classifier_sheet(r: dict, label: str, data: str | Path, path: Path) -> None
         images = np.stack([reader.image[e["index"]] for e in errors])
     titles = [f"#{e['index']} {e['true']} as {e['predicted']} {_confidence(e)}\n"
               f"{str(e.get('contactor', '')).split(': ')[-1]}, "
-              f"{e.get('active taxels', '?')} taxels" for e in errors]  # fmt: skip
+              f"{e.get('active taxels', '?')} taxels"
+              + (f", {e['hand parts']}" if e.get("hand parts") else "")
+              for e in errors]  # fmt: skip
     save_contact_sheet(path, images, titles=titles, n_cols=6,
                        title=f"{label}: its {len(errors)} most confident errors of "
                              f"{len(r['errors'])} (test split)")  # fmt: skip
@@ -352,7 +360,7 @@ def _error_text(r: dict) -> list[str]:
         sure = ("SVM margin" if "margin" in r["errors"][0]
                 else "probability given to the wrong class")
         return [f"Its {shown} most confident errors of {len(r['errors'])} (sample index, truth, "
-                f"{sure}, contactor, active taxels):", "",
+                f"{sure}, contactor, active taxels, hand parts pressing):", "",
                 f"![most confident errors]({r['error_sheet']})", ""]  # fmt: skip
     worst = r["worst"]["images"]
     shown = r["worst"]["maps"]["shape"][0]

@@ -286,7 +286,8 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     model = build(lambda m: m)
     ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
     seg_groups = worst = None
-    found = dict.fromkeys(("by_active_taxels", "by_contactor", "errors"))
+    found = dict.fromkeys(("by_active_taxels", "by_contactor", "hands_by_parts",
+                           "hands_by_action", "errors"))
     if classify_data:  # accuracy by contact size and by contactor, most confident errors
         names = list(ckpt.get("class_names") or [str(c) for c in range(n_cls)])
         found = classifier_breakdown(data_path, split.indices, ref.predictions.numpy(),

@@ -11,6 +11,8 @@ from learn.breakdown import (
     accuracy_by_group,
     breakdown_markdown,
     group_markdown,
+    hand_parts_group,
+    hands_by_group,
     pack_labels,
     parts_in_contact,
     segmentation_by_group,
@@ -71,6 +73,28 @@ def test_accuracy_by_contactor_by_hand_least_accurate_first():
     assert "| object: rake | 3 | 2 | 33.3 |" in "\n".join(group_markdown(rows))
     with pytest.raises(ValueError, match="length"):
         accuracy_by_group(pred, truth, groups[:2])
+
+
+def test_hand_parts_groups_by_hand():
+    """Class ids 1..5 fingers, 6 palm, 0 none (tactile.CLASS_NAMES)."""
+    cases = {(): "no part", (0,): "no part", (6,): "palm only", (0, 6): "palm only",
+             (2,): "one finger", (1, 6): "palm + one finger", (2, 3): "two fingers",
+             (1, 2, 6): "3 parts", (1, 2, 3, 4): "4 parts", (1, 2, 3, 4, 5, 6): "6 parts"}
+    for parts, name in cases.items():
+        assert hand_parts_group(set(parts)) == name, parts
+
+
+def test_hands_by_group_skips_non_hands_and_keeps_the_given_order():
+    groups = [None, "palm only", "3 parts", None, "palm only", "6 parts", "later"]
+    truth = np.array([0, 1, 1, 0, 1, 1, 1])
+    pred = np.array([1, 0, 1, 1, 1, 1, 0])  # the two non-hand errors must not count
+    order = ("palm only", "3 parts", "6 parts")
+    rows = hands_by_group(pred, truth, groups, order)
+    assert [(r["group"], r["n"], r["errors"]) for r in rows] == [
+        ("palm only", 2, 1), ("3 parts", 1, 0), ("6 parts", 1, 0), ("later", 1, 1)]
+    assert [r["group"] for r in hands_by_group(pred, truth, groups)][:2] == ["later", "palm only"]
+    assert hands_by_group(pred, truth, [None] * 7) == []
+    assert "| hand parts | samples |" in group_markdown(rows, "hand parts")[0]
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -116,6 +116,16 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     cm = np.asarray(clf["cm"])
     assert groups[0]["errors"] == cm.sum() - np.trace(cm)
     assert seg["by_active_taxels"] is None and seg["by_contactor"] is None
+    # the hand samples by parts pressing and by action re-add to the confusion matrix's hand row
+    hand = clf["class_names"].index("hand")
+    for key in ("hands_by_parts", "hands_by_action"):
+        assert sum(g["n"] for g in clf[key]) == sum(clf["cm"][hand]), key
+        assert sum(g["errors"] for g in clf[key]) == sum(clf["cm"][hand]) - cm[hand, hand], key
+    assert [g["group"] for g in clf["hands_by_action"]] == ["unknown"]  # no action stored
+    # every tiny hand is a palm disc and four finger stripes, and no threshold is recorded
+    assert [g["group"] for g in clf["hands_by_parts"]] == ["5 parts"]
+    assert "Accuracy on the hand samples by the hand parts" in text
+    assert seg["hands_by_parts"] is None
     # the segmenter's groups: every test image in one group per grouping, and the hand-parts
     # groups re-add to the whole test split's pixel count
     by = seg["segmentation_by_group"]
