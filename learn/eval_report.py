@@ -64,10 +64,12 @@ TTA_SUFFIX = " + test-time flips"
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
     test-time flips); where two rows would share a label, the input size, then the width
-    multiplier (each when theirs differ), then the training data, then the run folder, added."""
+    multiplier, then the training epochs (each when theirs differ), then the training data,
+    then the run folder, added."""
     labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
     for extra, only_if_differs in ((size_label, True),
                                    (lambda r: width_label(r) or "default width", True),
+                                   (epochs_label, True),
                                    (_data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False)):
         groups: dict[str, set[str]] = {}
@@ -92,6 +94,12 @@ def size_label(r: dict) -> str:
     model = (r.get("config") or {}).get("model") or {}
     h, w = r.get("input_size") or model.get("input_size") or ModelConfig().input_size
     return f"{h} x {w} px"
+
+
+def epochs_label(r: dict) -> str:
+    """``<n> epochs``, the training schedule's length of a report row's network."""
+    n = ((r.get("config") or {}).get("train") or {}).get("epochs")
+    return "epochs unknown" if n is None else f"{n} epochs"
 
 
 def width_label(r: dict) -> str | None:

@@ -241,6 +241,12 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
         "SegNet, 68 x 100 px", "SegNet, 136 x 200 px", "SegNet + test-time flips"]
     # a size both rows share says nothing, like a shared width
     assert row_labels([dict(b, input_size=[136, 200]), big]) == ["SegNet, w0.5", "SegNet, w0.25"]
+    # the same network and size trained for two schedules: the epochs tell them apart
+    long = dict(big, config={"model": big["config"]["model"], "train": {"epochs": 30}},
+                checkpoint="/r/long/best.pt")
+    short = dict(long, config={**long["config"], "train": {"epochs": 15}})
+    assert row_labels([short, long, dict(long, tta_views=[0, 1, 2])]) == [
+        "SegNet, 15 epochs", "SegNet, 30 epochs", "SegNet + test-time flips"]
 
 
 def _model_and_test_split(ckpt_path, data):
