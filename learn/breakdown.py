@@ -6,8 +6,8 @@ over all images. ``handskin evaluate`` adds, for a handskin dataset, the accurac
 class within bins of the number of active taxels (pressure above the dataset's active
 threshold), and the accuracy on each kind of contactor (``kind: type`` from the dataset's
 ``contactor`` JSON, e.g. ``object: rake``), so a user sees which contacts cost the accuracy;
-and for the hand samples, the accuracy by the hand parts that press (a palm alone looks like a
-flat object) and by action. For a segmenter it adds pixel accuracy and mIoU of each group of
+and for the hand samples, the accuracy by the hand parts that press (a palm alone leaves one
+round print) and by action. For a segmenter it adds pixel accuracy and mIoU of each group of
 test images: by contactor (right or left hand), by the dataset's ``action`` and by how many
 hand parts touch (from the label image): finger identity is easy to see on a whole-hand print
 and not on three fingertips.
@@ -156,22 +156,28 @@ def hand_parts_group(parts: set[int] | frozenset[int], palm: int = 6) -> str:
 def hand_parts_groups(data_path: str | Path, indices: np.ndarray) -> list[str | None]:
     """`hand_parts_group` of each of samples ``indices`` (S,) of a handskin dataset from the
     ``taxel_label`` of its active taxels (pressure above the dataset's active threshold);
-    None for a non-hand sample, ``"unknown"`` for all when the dataset has no ``taxel_label``
-    or ``is_hand``."""
+    None for a non-hand sample (all None when the dataset has no ``is_hand``), ``"unknown"``
+    for a hand when the dataset has no ``taxel_label``."""
     from learn.predict import active_threshold_pa
     from tactile import CLASS_NAMES
     from tactile.dataset.reader import DatasetReader
 
+    out: list[str | None] = [None] * len(indices)
     with DatasetReader(data_path) as reader:
-        if not {"taxel_label", "is_hand"} <= set(reader.fields):
-            return ["unknown"] * len(indices)
+        if "is_hand" not in reader.fields:
+            return out
         order = np.argsort(indices)
         rows = np.asarray(indices)[order]
-        active = reader.pressure_pa[rows] > active_threshold_pa(reader)
-        labels, hand = reader["taxel_label"][rows], reader["is_hand"][rows]
-    palm, out = CLASS_NAMES.index("palm"), [None] * len(indices)
-    for pos, lab, act, h in zip(order, labels, active, hand, strict=True):
-        out[pos] = hand_parts_group(set(lab[act].tolist()), palm) if h else None
+        hand = reader["is_hand"][rows]
+        labels = active = None
+        if "taxel_label" in reader.fields:
+            labels = reader["taxel_label"][rows]
+            active = reader.pressure_pa[rows] > active_threshold_pa(reader)
+    palm = CLASS_NAMES.index("palm")
+    for j, pos in enumerate(order):
+        if hand[j]:
+            out[pos] = ("unknown" if labels is None
+                        else hand_parts_group(set(labels[j][active[j]].tolist()), palm))
     return out
 
 

@@ -61,18 +61,31 @@ def make_sample(i: int, tmap: TactileMap, flat_mm: np.ndarray) -> dict:
     }  # fmt: skip
 
 
-@pytest.fixture(scope="session")
-def tiny_dataset(tmp_path_factory):
-    """Folder of a 48-sample dataset on a 60 × 90 mm sector (8 mm pitch)."""
+def write_tiny_dataset(folder, samples: list[int], drop: tuple[str, ...] = ()):
+    """Write samples ``samples`` (`make_sample` numbering) of the tiny set to ``folder``,
+    without the fields ``drop``; returns the folder."""
     layout, flat_mm = cylinder_sector_layout(width_mm=60, length_mm=90, pitch_mm=5)
     tmap = TactileMap.build(layout)
-    folder = tmp_path_factory.mktemp("learn_data") / "tiny"
     writer = DatasetWriter(folder, config={"test": "tiny"}, part="sector", generator_version="t",
                            seed=3, tmap=tmap, layout=layout,
                            attrs={"skin_counts_per_pa": GAIN})  # fmt: skip
-    writer.write_chunk(0, [make_sample(i, tmap, flat_mm) for i in range(N_HAND + N_OTHER)])
+    rows = [make_sample(i, tmap, flat_mm) for i in samples]
+    writer.write_chunk(0, [{k: v for k, v in r.items() if k not in drop} for r in rows])
     writer.merge()
     return folder
+
+
+@pytest.fixture(scope="session")
+def tiny_writer():
+    """`write_tiny_dataset(folder, samples, drop=())`: a few tiny samples, some fields left out."""
+    return write_tiny_dataset
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(tmp_path_factory):
+    """Folder of a 48-sample dataset on a 60 × 90 mm sector (8 mm pitch)."""
+    folder = tmp_path_factory.mktemp("learn_data") / "tiny"
+    return write_tiny_dataset(folder, list(range(N_HAND + N_OTHER)))
 
 
 def make_run(arch: str = "handsnet", **train: object) -> RunConfig:

@@ -12,6 +12,7 @@ from learn.breakdown import (
     breakdown_markdown,
     group_markdown,
     hand_parts_group,
+    hand_parts_groups,
     hands_by_group,
     pack_labels,
     parts_in_contact,
@@ -95,6 +96,17 @@ def test_hands_by_group_skips_non_hands_and_keeps_the_given_order():
     assert [r["group"] for r in hands_by_group(pred, truth, groups)][:2] == ["later", "palm only"]
     assert hands_by_group(pred, truth, [None] * 7) == []
     assert "| hand parts | samples |" in group_markdown(rows, "hand parts")[0]
+
+
+@pytest.mark.parametrize("drop", [(), ("taxel_label", "label_image"), ("is_hand",)])
+def test_hand_parts_groups_read_from_a_dataset(tmp_path, tiny_writer, drop):
+    """Hands of the tiny set press a palm disc and four finger stripes (5 parts; no active
+    threshold recorded, so every labelled taxel counts); non-hands get None. Without taxel
+    labels a hand's parts are "unknown"; without ``is_hand`` no sample is known as a hand."""
+    folder = tiny_writer(tmp_path / "d", [0, 1, 30, 31], drop)  # two hands, two blobs
+    hand = "5 parts" if not drop else "unknown" if "taxel_label" in drop else None
+    got = hand_parts_groups(folder, np.array([1, 2, 0, 3]))  # out of order on purpose
+    assert got == [hand, None, hand, None]
 
 
 @pytest.mark.parametrize("seed", range(4))
