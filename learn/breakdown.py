@@ -187,7 +187,7 @@ def hands_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[str | N
     ``order`` (groups not in it last) or, without ``order``, least accurate first."""
     keep = np.flatnonzero([g is not None for g in groups])
     rows = accuracy_by_group(np.asarray(pred).ravel()[keep], np.asarray(truth).ravel()[keep],
-                             [groups[k] for k in keep]) if len(keep) else []  # fmt: skip
+                             [groups[k] for k in keep])  # fmt: skip
     if order is not None:
         rank = {g: i for i, g in enumerate(order)}
         rows.sort(key=lambda r: (rank.get(r["group"], len(rank)), r["group"]))
