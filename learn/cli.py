@@ -30,6 +30,9 @@ def _hand_classes(text: str | None) -> tuple[str, ...] | None:
     return None if not text else tuple(t.strip() for t in text.split(",") if t.strip())
 
 
+RUN_KEYS = ("val_fraction", "precision")  # overrides of RunConfig itself, not of its train table
+
+
 def resolve_run(arch: str, config: Path | None, overrides: dict, test_c: bool):
     """The RunConfig: the arch's preset, the TOML file over it, then command-line overrides."""
     from learn import config as C
@@ -42,11 +45,10 @@ def resolve_run(arch: str, config: Path | None, overrides: dict, test_c: bool):
               "fcn16s": C.FCN16S}[arch]  # fmt: skip
     run = RunConfig(model=preset.model, train=C.FINETUNE_TEST_C if test_c else preset.train)
     run = load_run_config(config, run) if config is not None else run
-    train = {k: v for k, v in overrides.items() if v is not None and k != "val_fraction"}
+    top = {k: overrides[k] for k in RUN_KEYS if overrides.get(k) is not None}
+    train = {k: v for k, v in overrides.items() if v is not None and k not in RUN_KEYS}
     run = replace_train(run, **train) if train else run
-    if overrides.get("val_fraction") is not None:
-        run = dataclasses.replace(run, val_fraction=overrides["val_fraction"])
-    return run
+    return dataclasses.replace(run, **top) if top else run
 
 
 def _check_data(data: Path) -> None:
@@ -87,6 +89,9 @@ BatchOpt = _opt(int | None, "Images per optimisation step.")
 LrOpt = _opt(float | None, "Initial learning rate (dimensionless, per step).")
 SeedOpt = _opt(int | None, "Seed of init, shuffling and splits (integer).")
 ValOpt = _opt(float | None, "Share (0-1) of the train split's subjects held out for validation.")
+PrecisionOpt = _opt(str | None, "Number format of the training forward pass: fp32 (the preset) "
+                    "or bf16 (bfloat16 autocast, weights and loss in fp32; about 1.8x faster "
+                    "steps on CPUs with native bf16: AVX512-BF16 or AMX; no unit).")
 HandOpt = _opt(str | None, "Image folders: comma-separated folder names that are 'hand' "
                "(e.g. hand,finger); default: every folder its own class.")
 InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file); vgg_svm: the vgg16 "
@@ -110,6 +115,7 @@ def train_command(
     lr: LrOpt = None,
     seed: SeedOpt = None,
     val_fraction: ValOpt = None,
+    precision: PrecisionOpt = None,
     hand_classes: HandOpt = None,
     init: InitOpt = None,
     test_c: TestCOpt = False,
@@ -126,13 +132,13 @@ def train_command(
             raise DataError(f"no checkpoint at {init}. Fix: give a .pt file from handskin train")
         if arch in CLASSICAL:
             unused = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction,
-                      "--test-c": test_c or None, "--resume": resume or None,
-                      "--cv-grid": cv_grid}  # fmt: skip
+                      "--precision": precision, "--test-c": test_c or None,
+                      "--resume": resume or None, "--cv-grid": cv_grid}  # fmt: skip
             _train_classical(arch, data, out, config, seed, _hand_classes(hand_classes), init,
                              epochs, unused, progress)  # fmt: skip
             return
         over = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "seed": seed,
-                "val_fraction": val_fraction}  # fmt: skip
+                "val_fraction": val_fraction, "precision": precision}  # fmt: skip
         run = resolve_run(arch, config, over, test_c)
         _train(run, data, out, _hand_classes(hand_classes), init, resume, cv_grid, cv_folds,
                progress)  # fmt: skip
@@ -144,9 +150,10 @@ def _train(run, data, out, hand, init, resume, cv_grid, cv_folds, progress) -> N
     from learn.checkpoint import versions
     from learn.crossval import cross_validate, cv_markdown, parse_grid
     from learn.evaluate import evaluate_tensors
-    from learn.train import fit, load_data
+    from learn.train import check_precision, fit, load_data
     from tactile.config import to_dict
 
+    check_precision(run)
     grid = parse_grid(cv_grid) if cv_grid else None
     if grid:
         cv = cross_validate(run, data, grid, k=cv_folds, hand_classes=hand)

@@ -34,7 +34,7 @@ from learn.checkpoint import (
     save_checkpoint,
 )
 from learn.config import HANDSNET, ModelConfig, TrainConfig
-from learn.evaluate import evaluate_tensors, plot_history
+from learn.evaluate import bf16_supported, evaluate_tensors, plot_history
 from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
 from learn.losses import SegmentationLoss
@@ -43,6 +43,7 @@ from learn.tta import PAPER_VIEWS, VIEW_DIMS
 from tactile.config import from_dict, read_toml, to_dict, to_toml
 from tactile.errors import ConfigError
 
+PRECISIONS = ("fp32", "bf16")  # RunConfig.precision: the training forward pass's number format
 TASK_OF_ARCH = {"handsnet": "classify", "vgg16": "classify", "segnet": "segment",
                 "fcn16s": "segment"}  # fmt: skip
 
@@ -65,6 +66,10 @@ class RunConfig:
     # SegNet with it, same steps: 52.8 % mIoU (53.5 % without), so it is off by default.
     rot180: bool = False
     threads: int = 2  # torch CPU threads (the project's machines have 2 shared cores)
+    # number format of the training forward pass: "fp32", or "bf16" to autocast convolutions and
+    # matrix products to bfloat16 (torch.autocast) while weights, optimizer state, loss and
+    # validation stay float32; needs a CPU with native bf16 (AVX512-BF16 / AMX, `check_precision`)
+    precision: str = "fp32"
     eval_batch_size: int = 64  # images per evaluation forward pass
 
     def __post_init__(self) -> None:
@@ -75,6 +80,12 @@ class RunConfig:
             raise ConfigError(f"RunConfig.val_fraction must be in [0, 1), not {self.val_fraction}")
         if self.patience_epochs < 0 or self.threads < 1 or self.eval_batch_size < 1:
             raise ConfigError("RunConfig: patience_epochs >= 0, threads >= 1, eval_batch_size >= 1")
+        if self.precision not in PRECISIONS:
+            raise ConfigError(
+                f"RunConfig.precision {self.precision!r} is not one of {', '.join(PRECISIONS)}. "
+                'Fix: precision = "fp32" (the default) or "bf16" (faster on CPUs with native '
+                "bfloat16)"
+            )
 
     @property
     def task(self) -> str:
@@ -147,24 +158,40 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
                            desc=f"epoch {epoch + 1}/{run.train.epochs}", leave=False)  # fmt: skip
     for start in bar:
         x, y = get_batch(data, order[start : start + run.train.batch_size], views)
-        value = train_step(model, loss_fn, optimizer, x, y, run.task)
+        value = train_step(model, loss_fn, optimizer, x, y, run.task, run.precision)
         total += value * len(y)
         bar.set_postfix(loss=f"{value:.4f}")
     return total / len(order)
 
 
-def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task: str) -> float:
+def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task: str,
+               precision: str = "fp32") -> float:  # fmt: skip
     """One optimisation step on images ``x`` (B, 1, h, w) and targets ``y``; returns the loss.
 
     Classifiers get channels-last input (their weights are channels-last, see :func:`build`).
+    ``precision="bf16"`` runs the forward pass under bfloat16 autocast (`RunConfig.precision`);
+    the loss is taken on float32 logits.
     """
     if task == "classify":
         x = x.contiguous(memory_format=torch.channels_last)
-    loss = loss_fn(model(x), y)
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
+        out = model(x)
+    loss = loss_fn(out.float(), y)
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
     optimizer.step()
     return loss.item()
+
+
+def check_precision(run: RunConfig) -> None:
+    """Raise ConfigError when ``run.precision`` is "bf16" on a CPU without native bfloat16
+    kernels, where autocast would emulate them and train slower than float32."""
+    if run.precision == "bf16" and not bf16_supported():
+        raise ConfigError(
+            "precision \"bf16\" needs a CPU with native bfloat16 (AVX512-BF16 or AMX); this "
+            "one has none, so bf16 would train slower than fp32. Fix: precision = \"fp32\" "
+            "(--precision fp32)"
+        )
 
 
 def build(run: RunConfig, init_from: str | Path | None = None):
@@ -233,6 +260,7 @@ def fit(
     stop_after_epoch : stop after this many completed epochs (to test resumption).
     on_epoch : called as ``on_epoch(epoch, optimizer)`` before each epoch's training.
     """
+    check_precision(run)
     torch.set_num_threads(run.threads)
     out = None if out_dir is None else Path(out_dir)
     model, optimizer, scheduler = build(run, init_from)

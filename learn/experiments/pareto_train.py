@@ -45,8 +45,9 @@ def train_budgeted(run, train, budget_s: float, max_steps: float, init_from=None
     import torch
     from tqdm.auto import tqdm
 
-    from learn.train import build, get_batch, make_loss, train_step, views_of
+    from learn.train import build, check_precision, get_batch, make_loss, train_step, views_of
 
+    check_precision(run)
     torch.set_num_threads(run.threads)
     model, optimizer, _ = build(run, init_from)
     loss_fn, views = make_loss(run, train), views_of(run)
@@ -58,7 +59,7 @@ def train_budgeted(run, train, budget_s: float, max_steps: float, init_from=None
         if steps >= max_steps or time.perf_counter() - t0 >= budget_s:
             break
         x, y = get_batch(train, items, views)
-        train_step(model, loss_fn, optimizer, x, y, run.task)
+        train_step(model, loss_fn, optimizer, x, y, run.task, run.precision)
         steps, images = steps + 1, images + len(y)
         bar.update(min(round(time.perf_counter() - t0), bar.total) - bar.n)
     bar.close()

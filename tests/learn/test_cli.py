@@ -65,6 +65,9 @@ def test_train_evaluate_predict(app, tiny_dataset, small_config, checkpoints, tm
         (["train", "{data}", "--out", "{bad}"], "bad.toml is a file, not a folder"),
         (["train", "{data}", "--out", "{bad}/run", "--arch", "bovw"], "is a file, not a folder"),
         (["predict", "--frame", "{bad}"], "--frame with --map"),
+        (["train", "{data}", "--out", "{out}", "--precision", "fp16"], "precision 'fp16'"),
+        (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--precision", "bf16"],
+         "--precision does not apply"),
     ],
 )
 def test_errors_before_work(app, tiny_dataset, tmp_path, args, message):
