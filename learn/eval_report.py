@@ -51,10 +51,12 @@ def _init_text(r: dict) -> str:
     if r.get("timing") or r.get("members"):  # classical, or an ensemble (members listed)
         return ""
     init = r.get("init")
+    bf16 = (" Trained in bfloat16 (autocast forward pass)."
+            if (r.get("config") or {}).get("precision") == "bf16" else "")  # fmt: skip
     if init is None:
-        return " Initialisation: not recorded (a checkpoint from before it was)."
+        return " Initialisation: not recorded (a checkpoint from before it was)." + bf16
     return (" Initialisation: random (seeded)." if init == "random"
-            else f" Initialisation: the weights of `{init}`.")  # fmt: skip
+            else f" Initialisation: the weights of `{init}`.") + bf16  # fmt: skip
 
 
 #: Label suffix of a row scored with test-time flips (``learn.tta``).
@@ -64,12 +66,13 @@ TTA_SUFFIX = " + test-time flips"
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
     test-time flips); where two rows would share a label, the input size, then the width
-    multiplier, then the training epochs (each when theirs differ), then the training data,
-    then the run folder, added."""
+    multiplier, then the training epochs, then the training precision (each when theirs
+    differ), then the training data, then the run folder, added."""
     labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
     for extra, only_if_differs in ((size_label, True),
                                    (lambda r: width_label(r) or "default width", True),
                                    (epochs_label, True),
+                                   (precision_label, True),
                                    (_data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False)):
         groups: dict[str, set[str]] = {}
@@ -100,6 +103,12 @@ def epochs_label(r: dict) -> str:
     """``<n> epochs``, the training schedule's length of a report row's network."""
     n = ((r.get("config") or {}).get("train") or {}).get("epochs")
     return "epochs unknown" if n is None else f"{n} epochs"
+
+
+def precision_label(r: dict) -> str:
+    """``<fp32|bf16> training``, the number format of a report row's training forward pass
+    (`learn.train.RunConfig.precision`; checkpoints from before it was recorded: fp32)."""
+    return f"{(r.get('config') or {}).get('precision') or 'fp32'} training"
 
 
 def width_label(r: dict) -> str | None:

@@ -219,7 +219,7 @@ def test_vgg_svm_needs_a_vgg16_checkpoint(checkpoints, tiny_dataset, tmp_path):
 def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     """Rows of one method at two widths are told apart by width; a row with test-time flips
     follows the same model's plain row in the table."""
-    from learn.eval_report import _names, row_labels
+    from learn.eval_report import _init_text, _names, row_labels
     from learn.evaluate import PAPER_TABLE8
 
     a = {"arch": "segnet", "config": {"model": {"width": 0.25}}, "checkpoint": "/r/a/best.pt",
@@ -247,6 +247,11 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     short = dict(long, config={**long["config"], "train": {"epochs": 15}})
     assert row_labels([short, long, dict(long, tta_views=[0, 1, 2])]) == [
         "SegNet, 15 epochs", "SegNet, 30 epochs", "SegNet + test-time flips"]
+    # ... or for one schedule in two number formats (no precision recorded: fp32)
+    bf16 = dict(long, config={**long["config"], "precision": "bf16"}, checkpoint="/r/bf/best.pt")
+    assert row_labels([long, bf16]) == ["SegNet, fp32 training", "SegNet, bf16 training"]
+    assert "bfloat16" in _init_text(dict(bf16, init="random"))
+    assert "bfloat16" not in _init_text(dict(long, init="random"))
 
 
 def _model_and_test_split(ckpt_path, data):
