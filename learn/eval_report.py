@@ -51,12 +51,11 @@ def _init_text(r: dict) -> str:
     if r.get("timing") or r.get("members"):  # classical, or an ensemble (members listed)
         return ""
     init = r.get("init")
-    bf16 = (" Trained in bfloat16 (autocast forward pass)."
-            if (r.get("config") or {}).get("precision") == "bf16" else "")  # fmt: skip
-    if init is None:
-        return " Initialisation: not recorded (a checkpoint from before it was)." + bf16
-    return (" Initialisation: random (seeded)." if init == "random"
-            else f" Initialisation: the weights of `{init}`.") + bf16  # fmt: skip
+    text = (" Initialisation: not recorded (a checkpoint from before it was)." if init is None
+            else " Initialisation: random (seeded)." if init == "random"
+            else f" Initialisation: the weights of `{init}`.")  # fmt: skip
+    bf16 = precision_label(r) == "bf16 training"
+    return text + (" Trained in bfloat16 (autocast forward pass)." if bf16 else "")
 
 
 #: Label suffix of a row scored with test-time flips (``learn.tta``).
