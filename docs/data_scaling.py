@@ -25,7 +25,7 @@ import matplotlib.ticker
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from learn.eval_report import TTA_SUFFIX, width_label
+from learn.eval_report import TTA_SUFFIX, precision_label, width_label
 from learn.evaluate import ARCH_LABEL
 from learn.experiments import paper
 
@@ -55,11 +55,13 @@ def points(paths: list[Path]) -> dict[str, dict[str, list[tuple[int, float, str]
 
 
 def method_of(row: dict) -> str:
-    """A row's line: the method's name, its width multiplier when it has one, and whether it
-    was scored with test-time flips (``handskin evaluate --tta``)."""
+    """A row's line: the method's name, its width multiplier when it has one, ``bf16`` when it
+    was trained in bfloat16 (`learn.train.RunConfig.precision`), and whether it was scored with
+    test-time flips (``handskin evaluate --tta``)."""
     width = width_label(row)
+    bf16 = " bf16" if precision_label(row).startswith("bf16") else ""
     return ARCH_LABEL.get(row["arch"], row["arch"]) + ("" if width is None else f" {width}") + (
-        TTA_SUFFIX if row.get("tta_views") else "")  # fmt: skip
+        bf16 + (TTA_SUFFIX if row.get("tta_views") else ""))  # fmt: skip
 
 
 def chart(pts: dict, png: Path) -> Path:

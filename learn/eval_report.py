@@ -65,13 +65,14 @@ TTA_SUFFIX = " + test-time flips"
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
     test-time flips); where two rows would share a label, the input size, then the width
-    multiplier, then the training epochs, then the training precision (each when theirs
+    multiplier, the training epochs, the training precision, the seed (each when theirs
     differ), then the training data, then the run folder, added."""
     labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
     for extra, only_if_differs in ((size_label, True),
                                    (lambda r: width_label(r) or "default width", True),
                                    (epochs_label, True),
                                    (precision_label, True),
+                                   (lambda r: f"seed {r.get('seed')}", True),
                                    (_data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False)):
         groups: dict[str, set[str]] = {}

@@ -250,6 +250,12 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     # ... or for one schedule in two number formats (no precision recorded: fp32)
     bf16 = dict(long, config={**long["config"], "precision": "bf16"}, checkpoint="/r/bf/best.pt")
     assert row_labels([long, bf16]) == ["SegNet, fp32 training", "SegNet, bf16 training"]
+    # seed replicates: the seed, not the training data (whose split the seed also draws)
+    s0, s1 = (dict(long, seed=k, checkpoint=f"/r/s{k}/best.pt",
+                   train_data={"path": "/d/hands9k", "n_train": 5384 - k}) for k in (0, 1))
+    assert row_labels([s0, s1, dict(bf16, seed=1)]) == [
+        "SegNet, fp32 training, seed 0", "SegNet, fp32 training, seed 1",
+        "SegNet, bf16 training"]  # fmt: skip
     assert "bfloat16" in _init_text(dict(bf16, init="random"))
     assert "bfloat16" not in _init_text(dict(long, init="random"))
 
