@@ -13,7 +13,6 @@ import numpy as np
 import torch
 
 from learn import metrics as M
-from learn.config import ModelConfig
 from learn.evaluate import (
     ARCH_LABEL,
     PAPER_TABLE3,
@@ -22,27 +21,18 @@ from learn.evaluate import (
     confusion_markdown,
 )
 from learn.leakage import leakage_note
+from learn.row_labels import TTA_SUFFIX, data_name, row_labels, trained_precision
 
 
 def _fmt(v: float | None, scale: float = 1.0) -> str:
     return "unknown" if v is None else f"{scale * v:.2f}"
 
 
-def _data_name(r: dict) -> str:
-    """A report row's training data: ``name (N train)``, "unknown" if the checkpoint does not
-    say."""
-    d = r.get("train_data") or {}
-    if not d.get("path"):
-        return "unknown"
-    n = d.get("n_train")
-    return Path(str(d["path"])).name + ("" if n is None else f" ({n:,} train)")
-
-
 def trained_on(r: dict) -> str:
     """The "trained on" cell of a report row: its training data, and a warning when test
     samples share subjects or object instances with it (``learn.leakage``)."""
     leak = (r.get("shared_with_training") or {}).get("test_samples")
-    return _data_name(r) + (f"; not held out: {leak} test samples share its subjects"
+    return data_name(r) + (f"; not held out: {leak} test samples share its subjects"
                             if leak else "")  # fmt: skip
 
 
@@ -54,67 +44,8 @@ def _init_text(r: dict) -> str:
     text = (" Initialisation: not recorded (a checkpoint from before it was)." if init is None
             else " Initialisation: random (seeded)." if init == "random"
             else f" Initialisation: the weights of `{init}`.")  # fmt: skip
-    bf16 = precision_label(r) == "bf16 training"
+    bf16 = trained_precision(r) == "bf16"
     return text + (" Trained in bfloat16 (autocast forward pass)." if bf16 else "")
-
-
-#: Label suffix of a row scored with test-time flips (``learn.tta``).
-TTA_SUFFIX = " + test-time flips"
-
-
-def row_labels(rows: list[dict]) -> list[str]:
-    """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
-    test-time flips); where two rows would share a label, the input size, then the width
-    multiplier, the training epochs, the training precision, the seed (each when theirs
-    differ), then the training data, then the run folder, added."""
-    labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
-    for extra, only_if_differs in ((size_label, True),
-                                   (lambda r: width_label(r) or "default width", True),
-                                   (epochs_label, True),
-                                   (precision_label, True),
-                                   (lambda r: f"seed {r.get('seed')}", True),
-                                   (_data_name, False),
-                                   (lambda r: Path(r["checkpoint"]).parent.name, False)):
-        groups: dict[str, set[str]] = {}
-        for lab, r in zip(labels, rows, strict=True):
-            groups.setdefault(lab, set()).add(extra(r))
-        dup = {lab for lab in labels if labels.count(lab) > 1
-               and (len(groups[lab]) > 1 or not only_if_differs)}  # fmt: skip
-        labels = [f"{lab}, {extra(r)}" if lab in dup else lab
-                  for lab, r in zip(labels, rows, strict=True)]  # fmt: skip
-    return labels
-
-
-def method_label(r: dict) -> str:
-    """A row's method: ``ARCH_LABEL`` of its arch; for an ensemble, ``mean of A + B``."""
-    if r.get("members"):
-        return "mean of " + " + ".join(ARCH_LABEL.get(m["arch"], m["arch"]) for m in r["members"])
-    return ARCH_LABEL.get(r["arch"], r["arch"])
-
-
-def size_label(r: dict) -> str:
-    """``<h> x <w> px``, a report row's network input size."""
-    model = (r.get("config") or {}).get("model") or {}
-    h, w = r.get("input_size") or model.get("input_size") or ModelConfig().input_size
-    return f"{h} x {w} px"
-
-
-def epochs_label(r: dict) -> str:
-    """``<n> epochs``, the training schedule's length of a report row's network."""
-    n = ((r.get("config") or {}).get("train") or {}).get("epochs")
-    return "epochs unknown" if n is None else f"{n} epochs"
-
-
-def precision_label(r: dict) -> str:
-    """``<fp32|bf16> training``, the number format of a report row's training forward pass
-    (`learn.train.RunConfig.precision`; checkpoints from before it was recorded: fp32)."""
-    return f"{(r.get('config') or {}).get('precision') or 'fp32'} training"
-
-
-def width_label(r: dict) -> str | None:
-    """``w<multiplier>`` of a report row's network (None: no width multiplier configured)."""
-    width = ((r.get("config") or {}).get("model") or {}).get("width")
-    return None if width is None else f"w{width:g}"
 
 
 def _ours(rows: list[dict], task: str) -> dict[str, dict]:
@@ -213,7 +144,7 @@ def _members_text(r: dict) -> list[str]:
         width = "" if m.get("width") is None else f", w{m['width']:g}"
         lines.append(f"- `{m['checkpoint']}`: {ARCH_LABEL.get(m['arch'], m['arch'])}{width}, "
                      f"epoch {m['epoch']}, seed {m['seed']}, trained on "
-                     f"{_data_name({'train_data': m['train_data']})}"
+                     f"{data_name({'train_data': m['train_data']})}"
                      + ("" if not m.get("tta_views") else f", flips over views {m['tta_views']}")
                      + ".")  # fmt: skip
     return [*lines, ""]

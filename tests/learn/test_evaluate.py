@@ -219,8 +219,9 @@ def test_vgg_svm_needs_a_vgg16_checkpoint(checkpoints, tiny_dataset, tmp_path):
 def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     """Rows of one method at two widths are told apart by width; a row with test-time flips
     follows the same model's plain row in the table."""
-    from learn.eval_report import _init_text, _names, row_labels
+    from learn.eval_report import _init_text, _names
     from learn.evaluate import PAPER_TABLE8
+    from learn.row_labels import row_labels
 
     a = {"arch": "segnet", "config": {"model": {"width": 0.25}}, "checkpoint": "/r/a/best.pt",
          "train_data": {"path": "/d/hands9k", "n_train": 5384}, "tta_views": None}

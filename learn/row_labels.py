@@ -1,0 +1,84 @@
+"""Labels of `handskin evaluate` report rows: a method's name, and what tells two rows of one
+method apart (input size, width, epochs, training precision, seed, training data, run folder).
+Used by the report's tables (`learn.eval_report`) and by the charts drawn from report JSON."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from learn.config import ModelConfig
+from learn.evaluate import ARCH_LABEL
+
+
+def data_name(r: dict) -> str:
+    """A report row's training data: ``name (N train)``, "unknown" if the checkpoint does not
+    say."""
+    d = r.get("train_data") or {}
+    if not d.get("path"):
+        return "unknown"
+    n = d.get("n_train")
+    return Path(str(d["path"])).name + ("" if n is None else f" ({n:,} train)")
+
+
+#: Label suffix of a row scored with test-time flips (``learn.tta``).
+TTA_SUFFIX = " + test-time flips"
+
+
+def row_labels(rows: list[dict]) -> list[str]:
+    """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
+    test-time flips); where two rows would share a label, the input size, then the width
+    multiplier, the training epochs, the training precision, the seed (each when theirs
+    differ), then the training data, then the run folder, added."""
+    labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
+    for extra, only_if_differs in ((size_label, True),
+                                   (lambda r: width_label(r) or "default width", True),
+                                   (epochs_label, True),
+                                   (precision_label, True),
+                                   (lambda r: f"seed {r.get('seed')}", True),
+                                   (data_name, False),
+                                   (lambda r: Path(r["checkpoint"]).parent.name, False)):
+        groups: dict[str, set[str]] = {}
+        for lab, r in zip(labels, rows, strict=True):
+            groups.setdefault(lab, set()).add(extra(r))
+        dup = {lab for lab in labels if labels.count(lab) > 1
+               and (len(groups[lab]) > 1 or not only_if_differs)}  # fmt: skip
+        labels = [f"{lab}, {extra(r)}" if lab in dup else lab
+                  for lab, r in zip(labels, rows, strict=True)]  # fmt: skip
+    return labels
+
+
+def method_label(r: dict) -> str:
+    """A row's method: ``ARCH_LABEL`` of its arch; for an ensemble, ``mean of A + B``."""
+    if r.get("members"):
+        return "mean of " + " + ".join(ARCH_LABEL.get(m["arch"], m["arch"]) for m in r["members"])
+    return ARCH_LABEL.get(r["arch"], r["arch"])
+
+
+def size_label(r: dict) -> str:
+    """``<h> x <w> px``, a report row's network input size."""
+    model = (r.get("config") or {}).get("model") or {}
+    h, w = r.get("input_size") or model.get("input_size") or ModelConfig().input_size
+    return f"{h} x {w} px"
+
+
+def epochs_label(r: dict) -> str:
+    """``<n> epochs``, the training schedule's length of a report row's network."""
+    n = ((r.get("config") or {}).get("train") or {}).get("epochs")
+    return "epochs unknown" if n is None else f"{n} epochs"
+
+
+def trained_precision(r: dict) -> str:
+    """``fp32`` or ``bf16``, the number format of a report row's training forward pass
+    (`learn.train.RunConfig.precision`; checkpoints from before it was recorded: fp32)."""
+    return (r.get("config") or {}).get("precision") or "fp32"
+
+
+def precision_label(r: dict) -> str:
+    """``<fp32|bf16> training``, a report row's `trained_precision` as a label."""
+    return f"{trained_precision(r)} training"
+
+
+def width_label(r: dict) -> str | None:
+    """``w<multiplier>`` of a report row's network (None: no width multiplier configured)."""
+    width = ((r.get("config") or {}).get("model") or {}).get("width")
+    return None if width is None else f"w{width:g}"
