@@ -48,10 +48,19 @@ def row_labels(rows: list[dict]) -> list[str]:
 
 
 def method_label(r: dict) -> str:
-    """A row's method: ``ARCH_LABEL`` of its arch; for an ensemble, ``mean of A + B``."""
-    if r.get("members"):
-        return "mean of " + " + ".join(ARCH_LABEL.get(m["arch"], m["arch"]) for m in r["members"])
-    return ARCH_LABEL.get(r["arch"], r["arch"])
+    """A row's method: ``ARCH_LABEL`` of its arch; for an ensemble ``mean of A + B``, a repeated
+    method counted (``mean of 2 x SegNet``), and, when every member is one method, their seeds
+    if those differ (``mean of 3 x HandsNet (seeds 0, 1, 2)``)."""
+    members = r.get("members")
+    if not members:
+        return ARCH_LABEL.get(r["arch"], r["arch"])
+    names = [ARCH_LABEL.get(m["arch"], m["arch"]) for m in members]
+    counts = {n: names.count(n) for n in names}  # first-seen order
+    label = "mean of " + " + ".join(n if k == 1 else f"{k} x {n}" for n, k in counts.items())
+    seeds = [m.get("seed") for m in members]
+    if len(counts) == 1 and len(set(seeds)) > 1:
+        label += " (seeds " + ", ".join(str(s) for s in seeds) + ")"
+    return label
 
 
 def size_label(r: dict) -> str:

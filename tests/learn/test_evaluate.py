@@ -259,6 +259,13 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
         "SegNet, bf16 training"]  # fmt: skip
     assert "bfloat16" in _init_text(dict(bf16, init="random"))
     assert "bfloat16" not in _init_text(dict(long, init="random"))
+    # ensembles: a repeated method is counted, and seed replicates name their seeds
+    ens = {"arch": "ensemble", "checkpoint": "/r/a.pt + /r/b.pt + /r/c.pt",
+           "members": [{"arch": "handsnet", "seed": k} for k in (0, 1, 2)]}
+    mixed = dict(ens, members=[{"arch": "segnet", "seed": 0}, {"arch": "fcn16s", "seed": 0}])
+    same_seed = dict(ens, members=[{"arch": "segnet", "seed": 0}] * 2)
+    assert row_labels([ens, mixed, same_seed]) == [
+        "mean of 3 x HandsNet (seeds 0, 1, 2)", "mean of SegNet + FCN", "mean of 2 x SegNet"]
 
 
 def _model_and_test_split(ckpt_path, data):
