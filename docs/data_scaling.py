@@ -25,9 +25,8 @@ import matplotlib.ticker
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from learn.evaluate import ARCH_LABEL
 from learn.experiments import paper
-from learn.row_labels import TTA_SUFFIX, trained_precision, width_label
+from learn.row_labels import TTA_SUFFIX, method_label, trained_precision, width_label
 
 PAPER = {"HandsNet": paper.HANDSNET_ACCURACY_PCT, "SegNet": paper.SEGNET_MIOU_PCT}
 TASKS = (("classify", "accuracy", "test accuracy, %", "hand / non-hand"),
@@ -60,7 +59,7 @@ def method_of(row: dict) -> str:
     test-time flips (``handskin evaluate --tta``)."""
     width = width_label(row)
     bf16 = " bf16" if trained_precision(row) == "bf16" else ""
-    return ARCH_LABEL.get(row["arch"], row["arch"]) + ("" if width is None else f" {width}") + (
+    return method_label(row) + ("" if width is None else f" {width}") + (
         bf16 + (TTA_SUFFIX if row.get("tta_views") else ""))  # fmt: skip
 
 

@@ -4,6 +4,7 @@ Used by the report's tables (`learn.eval_report`) and by the charts drawn from r
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 
 from learn.config import ModelConfig
@@ -55,7 +56,7 @@ def method_label(r: dict) -> str:
     if not members:
         return ARCH_LABEL.get(r["arch"], r["arch"])
     names = [ARCH_LABEL.get(m["arch"], m["arch"]) for m in members]
-    counts = {n: names.count(n) for n in names}  # first-seen order
+    counts = Counter(names)  # first-seen order
     label = "mean of " + " + ".join(n if k == 1 else f"{k} x {n}" for n, k in counts.items())
     seeds = [m.get("seed") for m in members]
     if len(counts) == 1 and len(set(seeds)) > 1:
