@@ -99,6 +99,9 @@ InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file); vgg_svm:
 TestCOpt = _opt(bool, "The paper's Test C schedule: lr 0.01 halved at epoch 60 of 120, batch 128 "
                 "images, lr x 0.1 on the first two convolutions.")
 ResumeOpt = _opt(bool, "Continue from OUT/last.pt.")
+StopOpt = _opt(int | None, "Stop once this epoch (1-based, counted from the run's start) is "
+               "done, keeping the schedule of all the epochs, to split a long run; no test "
+               "scores until --resume finishes it (epoch number, no unit).")
 GridOpt = _opt(str | None, "Cross-validate first over a grid, e.g. "
                "'train.lr=0.01,0.001;train.batch_size=32,64' (each value in its field's unit).")
 FoldsOpt = _opt(int, "Folds of the cross-validation (count).")
@@ -120,6 +123,7 @@ def train_command(
     init: InitOpt = None,
     test_c: TestCOpt = False,
     resume: ResumeOpt = False,
+    stop_after_epoch: StopOpt = None,
     cv_grid: GridOpt = None,
     cv_folds: FoldsOpt = 5,
     progress: ProgressOpt = True,
@@ -133,27 +137,32 @@ def train_command(
         if arch in CLASSICAL:
             unused = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction,
                       "--precision": precision, "--test-c": test_c or None,
-                      "--resume": resume or None, "--cv-grid": cv_grid}  # fmt: skip
+                      "--resume": resume or None, "--cv-grid": cv_grid,
+                      "--stop-after-epoch": stop_after_epoch}  # fmt: skip
             _train_classical(arch, data, out, config, seed, _hand_classes(hand_classes), init,
                              epochs, unused, progress)  # fmt: skip
             return
         over = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "seed": seed,
                 "val_fraction": val_fraction, "precision": precision}  # fmt: skip
         run = resolve_run(arch, config, over, test_c)
-        _train(run, data, out, _hand_classes(hand_classes), init, resume, cv_grid, cv_folds,
-               progress)  # fmt: skip
+        _train(run, data, out, _hand_classes(hand_classes), init, resume, stop_after_epoch,
+               cv_grid, cv_folds, progress)  # fmt: skip
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
 
 
-def _train(run, data, out, hand, init, resume, cv_grid, cv_folds, progress) -> None:
+def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress) -> None:
     from learn.checkpoint import versions
     from learn.crossval import cross_validate, cv_markdown, parse_grid
     from learn.evaluate import evaluate_tensors
-    from learn.train import check_precision, fit, load_data
+    from learn.train import check_precision, check_stop, fit, load_data
     from tactile.config import to_dict
 
     check_precision(run)
+    if cv_grid and stop is not None:
+        raise ConfigError("--stop-after-epoch with --cv-grid: the grid's pick would be lost on "
+                          "--resume. Fix: cross-validate first, then train the pick in parts")
+    check_stop(stop, run, out, resume)
     grid = parse_grid(cv_grid) if cv_grid else None
     if grid:
         cv = cross_validate(run, data, grid, k=cv_folds, hand_classes=hand)
@@ -163,7 +172,12 @@ def _train(run, data, out, hand, init, resume, cv_grid, cv_folds, progress) -> N
         run = cv.best_run
     loaded = load_data(data, run, hand_classes=hand, progress=progress)
     run = _fit_classes(run, loaded)
-    result = fit(run, loaded, out, resume=resume, init_from=init, progress=progress)
+    result = fit(run, loaded, out, resume=resume, init_from=init, progress=progress,
+                 stop_after_epoch=stop)  # fmt: skip
+    if result.paused:
+        typer.echo(f"stopped after epoch {stop} of {run.train.epochs} (run in {out}); continue "
+                   "with the same command and --resume, without --stop-after-epoch to finish")
+        return
     report = {"config": to_dict(run), "versions": versions(), "seed": run.train.seed,
               "data": loaded.description, "best_val_metric": result.best_metric}  # fmt: skip
     if loaded.test is not None:

@@ -13,12 +13,25 @@ from learn.evaluate import ARCH_LABEL
 
 def data_name(r: dict) -> str:
     """A report row's training data: ``name (N train)``, "unknown" if the checkpoint does not
-    say."""
+    say; an ensemble's, its members' (one folder with several counts: ``name (N-M train)``, as
+    seeds split validation off differently)."""
+    if r.get("members"):
+        return _members_data(r["members"])
     d = r.get("train_data") or {}
     if not d.get("path"):
         return "unknown"
     n = d.get("n_train")
     return Path(str(d["path"])).name + ("" if n is None else f" ({n:,} train)")
+
+
+def _members_data(members: list[dict]) -> str:
+    names = list(dict.fromkeys(data_name({"train_data": m.get("train_data")}) for m in members))
+    datas = [m.get("train_data") or {} for m in members]
+    folders = {Path(str(d.get("path"))).name for d in datas}
+    counts = [d.get("n_train") for d in datas]
+    if len(names) == 1 or len(folders) > 1 or None in counts or not datas[0].get("path"):
+        return " + ".join(names)
+    return f"{folders.pop()} ({min(counts):,}-{max(counts):,} train)"
 
 
 #: Label suffix of a row scored with test-time flips (``learn.tta``).

@@ -101,6 +101,7 @@ class FitResult:
     history: list[dict[str, float]]
     best_metric: float
     out_dir: Path | None
+    paused: bool = False  # stopped by ``stop_after_epoch`` before the schedule's last epoch
 
 
 def metric_name(task: str) -> str:
@@ -257,7 +258,9 @@ def fit(
     epoch without validation), ``curves.png`` and ``run.toml``; None writes nothing.
     resume : continue from ``out_dir/last.pt``. init_from : fine-tune from any checkpoint (the
     weights whose names and shapes match; ``run.train.lr_factors`` scale per-layer lrs).
-    stop_after_epoch : stop after this many completed epochs (to test resumption).
+    stop_after_epoch : stop once this epoch (1-based, counted from the run's start, so across
+    resumes) is done, to split a long run; the schedule stays that of ``run.train.epochs`` and
+    ``resume`` continues it. ConfigError if it is below 1 or not after the resumed epoch.
     on_epoch : called as ``on_epoch(epoch, optimizer)`` before each epoch's training.
     """
     check_precision(run)
@@ -269,9 +272,11 @@ def fit(
     if resume and out is not None and (out / LAST).is_file():
         start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler)
         init_from = first if first not in (None, "random") else init_from
+    _check_stop(stop_after_epoch, start, run.train.epochs, None if out is None else out / LAST)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         (out / "run.toml").write_text(to_toml(run))
+    paused = False
     for epoch in range(start, run.train.epochs):
         if on_epoch is not None:
             on_epoch(epoch, optimizer)
@@ -287,11 +292,39 @@ def fit(
         if out is not None:
             title = f"{run.model.arch}, seed {run.train.seed}"
             plot_history(history, out / "curves.png", title, metric_name(run.task))
-        if _patience_out(history, run) or (stop_after_epoch and epoch + 1 >= stop_after_epoch):
+        if _patience_out(history, run):
+            break
+        if stop_after_epoch is not None and epoch + 1 >= stop_after_epoch:
+            paused = epoch + 1 < run.train.epochs
             break
     if data.val is not None:
         model.load_state_dict(best_state)
-    return FitResult(model, history, best, out)
+    return FitResult(model, history, best, out, paused)
+
+
+def check_stop(stop_after_epoch: int | None, run: RunConfig, out_dir: str | Path | None = None,
+               resume: bool = False) -> None:  # fmt: skip
+    """ConfigError unless ``stop_after_epoch`` ends an epoch that :func:`fit` would train for
+    ``run`` (resumed from ``out_dir/last.pt`` when ``resume``): checked before data is loaded."""
+    last = None if out_dir is None else Path(out_dir) / LAST
+    start = int(load_checkpoint(last)["epoch"]) if resume and last and last.is_file() else 0
+    _check_stop(stop_after_epoch, start, run.train.epochs, last)
+
+
+def _check_stop(stop_after_epoch: int | None, start: int, epochs: int, last: Path | None) -> None:
+    """Refuse a stop epoch that could not end an epoch of this (possibly resumed) run."""
+    if stop_after_epoch is None:
+        return
+    if not 1 <= stop_after_epoch <= epochs:
+        raise ConfigError(f"stop after epoch {stop_after_epoch}: the run's epochs are 1 to "
+                          f"{epochs}. Fix: give one of them (the schedule's length is "
+                          "train.epochs)")  # fmt: skip
+    if stop_after_epoch <= start:
+        raise ConfigError(
+            f"{last} already holds epoch {start}, so stopping after epoch "
+            f"{stop_after_epoch} would train nothing. Fix: give a later epoch, or leave the "
+            "stop out to finish the run"
+        )
 
 
 def _one_epoch(model, data: Data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool):

@@ -6,6 +6,8 @@ before any work."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 import torch
@@ -140,6 +142,30 @@ def test_a_rerun_reads_every_finetuning_result_back_without_training(transfer_ru
     assert again["classify"]["finetuned"] == res["classify"]["finetuned"]
 
 
+def test_segmentation_alone(transfer_run, tmp_path):
+    """--no-classification --segmentation trains and reports SegNet only, on the same datasets;
+    every fine-tuning result is a segmentation one (3 starts x (4, 8, all))."""
+    out, _ = transfer_run
+    data = {role: out / "data" / T.FOLDERS[role] for role in T.ROLES}
+    s = dataclasses.replace(SETTINGS, classification=False, segmentation=True)
+    res = T.run_transfer_experiment(tmp_path, s=s, plan=PLAN, progress=False, **data)
+    assert set(res) == {"segment", "report"}
+    files = sorted(p.name for p in (tmp_path / "models" / "finetune").glob("*.json"))
+    assert len(files) == 9 and all(f.startswith("segment-") for f in files), files
+    text = (tmp_path / "report.md").read_text()
+    assert "Segmentation: zero-shot" in text and "Classification" not in text
+    assert (tmp_path / "curve_segment.png").is_file() and not (tmp_path / "data").exists()
+    with DatasetReader(data["target"]) as ds:
+        held = ds.instance_id[:][ds.splits["test"]]
+    with DatasetReader(data["pretrain"]) as ds:  # SegNet pretrains on the hand samples only
+        hands = ds.is_hand[:].astype(bool) & ~np.isin(ds.instance_id[:], held[held >= 0])
+    desc = load_checkpoint(res["segment"]["synthetic_checkpoint"])["data"]
+    assert desc["n_train"] + desc["n_val"] == hands.sum() > 0
+    for points in res["segment"]["curve"].values():
+        assert [p["n"] for p in points][:2] == [4, 8] and len(points) == 3
+        assert all(0 <= p["metrics"]["mean_iou"] <= 1 for p in points), points
+
+
 def test_a_cached_result_is_recomputed_when_its_key_differs(tmp_path):
     from learn.experiments.transfer_cache import cached
 
@@ -182,6 +208,10 @@ def app() -> typer.Typer:
         (["--curve", "10,x"], "expected sample counts"),
         (["--epochs", "0"], "must be >= 1"),
         (["--n-target", "0"], "n = 0 is out of range"),
+        (["--no-classification"], "neither classification nor segmentation"),
+        (["--precision", "fp16"], "precision 'fp16'"),
+        (["--no-classification", "--segmentation", "--classifier", "{classifier}"],
+         "--classifier with --no-classification"),
     ],
 )
 def test_bad_input_fails_before_work(app, transfer_run, tmp_path, args, message):

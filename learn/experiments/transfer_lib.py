@@ -3,7 +3,8 @@
     s = TransferSettings(finetune_epochs=120)
     res = run_transfer("data/forearm", "data/ee", "data/ee_synthetic", "out", s)
 
-For each task (classification, and segmentation when asked or a segmenter is given):
+For each task (classification unless turned off, and segmentation when asked or a segmenter
+is given):
 1. the forearm model (given, or trained on ``source``) scores the end-effector test split as it is
    (zero-shot, the paper's Table 15); images of any map size are resized to the model's input;
 2. it is fine-tuned with the paper's Test C recipe on the end-effector train split (Table 16);
@@ -42,14 +43,23 @@ class TransferSettings:
     pretrain_flips: bool = True  # the paper's threefold flips while pretraining (False: faster)
     input_size: tuple[int, int] = NET_SIZE  # (h, w) px of models trained here
     segmentation: bool = False  # also SegNet (zero-shot, fine-tune, curve)
+    classification: bool = True  # HandsNet (zero-shot, fine-tune, curve); False: SegNet alone
     seed: int = 0
     threads: int = 2  # torch CPU threads
+    precision: str = "fp32"  # training forward pass of every run here ("bf16": RunConfig.precision)
 
     def __post_init__(self) -> None:
         if not self.curve_sizes or min(self.curve_sizes) < 1:
             raise ConfigError(f"curve sizes must be >= 1 samples, got {self.curve_sizes}")
         if min(self.finetune_epochs, self.pretrain_epochs, self.threads) < 1:
             raise ConfigError("finetune_epochs, pretrain_epochs and threads must be >= 1")
+        if not (self.classification or self.segmentation):
+            raise ConfigError("neither classification nor segmentation is asked for. Fix: drop "
+                              "--no-classification or add --segmentation")  # fmt: skip
+        if self.precision != "fp32":  # unknown, or bf16 on a CPU without it (imports torch)
+            from learn.train import RunConfig, check_precision
+
+            check_precision(RunConfig(precision=self.precision))
 
 
 def nested_order(labels: np.ndarray, seed: int) -> np.ndarray:
@@ -103,7 +113,8 @@ def finetune_run(model, s: TransferSettings, scratch: bool):
         loss=preset_run(model.arch).train.loss,
         lr_factors={} if scratch else C.FINETUNE_TEST_C.lr_factors,
     )  # fmt: skip
-    return RunConfig(model=model, train=train, val_fraction=0.0, threads=s.threads)
+    return RunConfig(model=model, train=train, val_fraction=0.0, threads=s.threads,
+                     precision=s.precision)  # fmt: skip
 
 
 def pretrain_run(model, s: TransferSettings):
@@ -111,7 +122,8 @@ def pretrain_run(model, s: TransferSettings):
     from learn.experiments.models import preset_run
 
     run = preset_run(model.arch, epochs=s.pretrain_epochs, seed=s.seed)
-    return dataclasses.replace(run, model=model, flips=s.pretrain_flips, threads=s.threads)
+    return dataclasses.replace(run, model=model, flips=s.pretrain_flips, threads=s.threads,
+                               precision=s.precision)  # fmt: skip
 
 
 def held_out_instances(target: Path) -> np.ndarray:
@@ -135,7 +147,8 @@ def pretrain_data(pretrain: Path, target: Path, run, progress: bool):
     ds = TorchTactileDataset(pretrain, None, run.task, run.model.input_size, flips=False)
     with DatasetReader(pretrain) as r:
         inst = r["instance_id"][:] if "instance_id" in r.fields else np.full(len(r), -1)
-    keep = np.flatnonzero(~np.isin(inst, held_out_instances(target)))
+    # positions in ds.indices (for segmentation, the hand samples only), not dataset rows
+    keep = np.flatnonzero(~np.isin(inst[np.asarray(ds.indices)], held_out_instances(target)))
     train, val = validation_split(subset(ds, keep), run.val_fraction, run.train.seed)
     desc = {"path": str(pretrain), "kind": "dataset", "n_train": len(train.indices),
             "n_val": 0 if val is None else len(val.indices), "n_test": 0,
@@ -173,8 +186,8 @@ def score(model_or_ckpt, test, num_classes: int) -> dict:
 
 
 def target_data(target: Path, run, progress: bool):
-    """(Data of the target: all train rows in split order, test; (S,) is_hand and (S,) dataset
-    sample index of the train rows)."""
+    """(Data of the target: its train rows in split order (for segmentation, the hand ones only,
+    as ``load_data`` keeps), test; (S,) is_hand and (S,) dataset sample index of those rows)."""
     from learn.folder import load_data
     from tactile.dataset.reader import DatasetReader
 
@@ -182,6 +195,10 @@ def target_data(target: Path, run, progress: bool):
     with DatasetReader(target) as ds:
         index = ds.splits["train"]
         hand = ds["is_hand"][:][index]
+    if run.task == "segment":
+        index, hand = index[hand == 1], hand[hand == 1]
+    if len(index) != len(data.train.y):
+        raise AssertionError(f"{len(index)} train rows of {target} but {len(data.train.y)} loaded")
     return data, hand, index
 
 

@@ -52,15 +52,16 @@ def confusions(rows: list[tuple[str, dict]], names: list[str]) -> str:
                        for n, r in rows)  # fmt: skip
 
 
-def curve_table(res: dict, key: str) -> str:
-    """Learning curve: one row per N, one column per initialisation (score %)."""
+def curve_table(res: dict, key: str, what: str = "samples") -> str:
+    """Learning curve: one row per N, one column per initialisation (score %); ``what`` the
+    N counts ("samples", "hand samples")."""
     sizes = [p["n"] for p in res["curve"]["scratch"]]
     body = [[n, *(_pct(res["curve"][i][k]["metrics"][key]) for i in INITS)]
             for k, n in enumerate(sizes)]  # fmt: skip
-    return markdown_table(["N (EE train samples)", *(f"from {i} %" for i in INITS)], body)
+    return markdown_table([f"N (EE train {what})", *(f"from {i} %" for i in INITS)], body)
 
 
-def curve_chart(res: dict, key: str, label: str):
+def curve_chart(res: dict, key: str, label: str, what: str = "samples"):
     """Score % against N (log x) per initialisation, zero-shot scores as dashed lines."""
     from matplotlib.figure import Figure
 
@@ -77,7 +78,7 @@ def curve_chart(res: dict, key: str, label: str):
     sizes = [p["n"] for p in res["curve"]["scratch"]]
     ax.set_xticks(sizes, [str(n) for n in sizes])
     ax.minorticks_off()
-    ax.set(xlabel="end-effector training samples N (log scale)", ylabel=f"test {label}, %",
+    ax.set(xlabel=f"end-effector training {what} N (log scale)", ylabel=f"test {label}, %",
            title=f"Test C learning curve: {label} on the end-effector test split")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
@@ -88,19 +89,20 @@ def write_task(rep, task: str, res: dict) -> None:
     """Tables 15 and 16, confusions and the learning curve of one task into ``rep``."""
     title = "Classification" if task == "classify" else "Segmentation"
     key, label = ("accuracy", "accuracy") if task == "classify" else ("mean_iou", "mean IoU")
+    what = "samples" if task == "classify" else "hand samples"  # segmentation: hands only
     zero = [(ZERO_SHOT[k], r) for k, r in res["zero_shot"].items()]
     rep.section(f"{title}: zero-shot on the end-effector (paper: Table 15)",
-                f"{res['n_test']} end-effector test samples, resized to "
+                f"{res['n_test']} end-effector test {what}, resized to "
                 f"{res['model']['input_size']} px.\n\n" + scores_table(task, zero)
                 + "\n\n" + confusions(zero, res["class_names"]))  # fmt: skip
     ft = [("forearm model, fine-tuned (Test C)", res["finetuned"]),
           ("synthetic end-effector model, fine-tuned (Test C)", res["curve"]["synthetic EE"][-1]),
           ("from scratch on end-effector data (Test C schedule)", res["curve"]["scratch"][-1])]
-    rep.section(f"{title}: fine-tuned on {res['n_train']} end-effector samples (paper: Table 16)",
+    rep.section(f"{title}: fine-tuned on {res['n_train']} end-effector {what} (paper: Table 16)",
                 scores_table(task, ft) + "\n\n" + confusions(ft[:1], res["class_names"]))
-    rep.section(f"{title}: learning curve ({label} %)", curve_table(res, key))
-    rep.figure(curve_chart(res, key, label), f"curve_{task}.png",
-               f"Test {label} against the number of end-effector training samples, fine-tuned "
+    rep.section(f"{title}: learning curve ({label} %)", curve_table(res, key, what))
+    rep.figure(curve_chart(res, key, label, what), f"curve_{task}.png",
+               f"Test {label} against the number of end-effector training {what}, fine-tuned "
                "with the Test C recipe from three starting points; dashed: zero-shot models. "
                "The paper's Test C numbers are unknown to us, so none is drawn.")
 
@@ -109,11 +111,12 @@ def run_transfer(source: str | Path, target: str | Path, pretrain: str | Path, o
                  s: TransferSettings, *, classifier: str | Path | None = None,
                  segmenter: str | Path | None = None, models_dir: str | Path | None = None,
                  notes: str = "", config: dict | None = None, progress: bool = True) -> dict:
-    """Run Test C for classification (and segmentation if asked or given); write ``out``/
+    """Run Test C for classification (unless ``s.classification`` is off) and segmentation (if
+    asked or given); write ``out``/
     report.md, results.json, curve_*.png. Returns the results dict {task: ...}."""
     source, target, pretrain, out = Path(source), Path(target), Path(pretrain), Path(out)
     models = Path(models_dir) if models_dir else out / "models"
-    tasks = {"classify": classifier}
+    tasks = {"classify": classifier} if s.classification else {}
     if s.segmentation or segmenter is not None:
         tasks["segment"] = segmenter
     for task, ckpt in tasks.items():  # checked before any work
@@ -140,10 +143,14 @@ def recipe_text(s: TransferSettings) -> str:
         f"the arch preset for {s.pretrain_epochs} epoch(s), "
         f"flips {'on' if s.pretrain_flips else 'off'}, best epoch on a subject-disjoint "
         "validation part. Curve subsets: nested, class-balanced random prefixes of the target's "
-        "train split (subject- and instance-disjoint from its test split)." + (
+        "train split (subject- and instance-disjoint from its test split)."
+        + (" SegNet trains and is scored on hand samples only (a non-hand print has no parts), "
+           "so its counts are of hand samples." if s.segmentation else "")
+        + (" Every training forward pass here ran in bfloat16 autocast (weights, optimizer and "
+           "loss in float32; `--precision bf16`)." if s.precision == "bf16" else "") + (
             "\n\n**Shortened run**: fewer epochs than the paper's 120 fine-tuning and the "
             "preset's 80 training epochs; networks this briefly trained stay near chance, so "
             "these scores test the pipeline, not the method. Run without --quick (or give "
-            "--classifier) for meaningful numbers."
+            "--classifier / --segmenter) for meaningful numbers."
             if s.finetune_epochs < 120 or s.pretrain_epochs < 80 else "")
     )

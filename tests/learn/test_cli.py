@@ -9,6 +9,7 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
+from learn.checkpoint import load_checkpoint
 from learn.cli import register
 from tactile.dataset import open_dataset
 
@@ -55,6 +56,25 @@ def test_train_evaluate_predict(app, tiny_dataset, small_config, checkpoints, tm
     assert "probability" in res.output and "palm" in res.output and (tmp_path / "p.png").is_file()
 
 
+def test_train_in_parts_equals_one_run(app, tiny_dataset, small_config, tmp_path):
+    """--stop-after-epoch then --resume gives the uninterrupted run's epochs and test scores;
+    the paused run writes no test scores, and a stop the resumed run has passed is refused."""
+    base = ["train", str(tiny_dataset), "--config", str(small_config), "--no-progress"]
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    assert runner.invoke(app, [*base, "--out", str(whole)]).exit_code == 0
+    res = runner.invoke(app, [*base, "--out", str(parts), "--stop-after-epoch", "1"])
+    assert res.exit_code == 0 and "stopped after epoch 1 of 2" in res.output, res.output
+    assert (parts / "last.pt").is_file() and not (parts / "test_metrics.json").exists()
+    res = runner.invoke(app, [*base, "--out", str(parts), "--resume", "--stop-after-epoch", "1"])
+    assert res.exit_code == 2 and "already holds epoch 1" in res.output, res.output
+    res = runner.invoke(app, [*base, "--out", str(parts), "--resume"])
+    assert res.exit_code == 0, res.output
+    a, b = (json.loads((d / "test_metrics.json").read_text()) for d in (whole, parts))
+    assert a["test_metrics"] == b["test_metrics"] and a["test_confusion"] == b["test_confusion"]
+    ha, hb = (load_checkpoint(d / "last.pt")["history"] for d in (whole, parts))
+    assert [h["train_loss"] for h in ha] == [h["train_loss"] for h in hb] and len(hb) == 2
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -68,6 +88,13 @@ def test_train_evaluate_predict(app, tiny_dataset, small_config, checkpoints, tm
         (["train", "{data}", "--out", "{out}", "--precision", "fp16"], "precision 'fp16'"),
         (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--precision", "bf16"],
          "--precision does not apply"),
+        (["train", "{data}", "--out", "{out}", "--stop-after-epoch", "0"], "epochs are 1 to"),
+        (["train", "{data}", "--out", "{out}", "--epochs", "3", "--stop-after-epoch", "4"],
+         "epochs are 1 to 3"),
+        (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--stop-after-epoch", "1"],
+         "--stop-after-epoch does not apply"),
+        (["train", "{data}", "--out", "{out}", "--stop-after-epoch", "1", "--cv-grid",
+          "train.lr=0.1,0.01"], "--stop-after-epoch with --cv-grid"),
     ],
 )
 def test_errors_before_work(app, tiny_dataset, tmp_path, args, message):

@@ -266,6 +266,16 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     same_seed = dict(ens, members=[{"arch": "segnet", "seed": 0}] * 2)
     assert row_labels([ens, mixed, same_seed]) == [
         "mean of 3 x HandsNet (seeds 0, 1, 2)", "mean of SegNet + FCN", "mean of 2 x SegNet"]
+    # an ensemble's training data are its members': one folder with the seeds' counts, or each
+    from learn.row_labels import data_name
+
+    seeds = dict(ens, members=[{"arch": "handsnet", "seed": k, "train_data": {
+        "path": "/d/forearm", "n_train": n}} for k, n in ((0, 2113), (1, 2098), (2, 2113))])
+    assert data_name(seeds) == "forearm (2,098-2,113 train)"
+    two = dict(ens, members=[{"train_data": {"path": "/d/hands9k", "n_train": 5384}},
+                             {"train_data": {"path": "/d/forearm", "n_train": 2113}}])
+    assert data_name(two) == "hands9k (5,384 train) + forearm (2,113 train)"
+    assert data_name(dict(ens, members=[two["members"][0]] * 2)) == "hands9k (5,384 train)"
 
 
 def _model_and_test_split(ckpt_path, data):
