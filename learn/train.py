@@ -292,7 +292,7 @@ def fit(
         if out is not None:
             title = f"{run.model.arch}, seed {run.train.seed}"
             plot_history(history, out / "curves.png", title, metric_name(run.task))
-        if _patience_out(history, run):
+        if patience_out(history, run):
             break
         if stop_after_epoch is not None and epoch + 1 >= stop_after_epoch:
             paused = epoch + 1 < run.train.epochs
@@ -339,7 +339,7 @@ def _one_epoch(model, data: Data, loss_fn, optimizer, run: RunConfig, epoch: int
     return row
 
 
-def _patience_out(history: list[dict], run: RunConfig) -> bool:
+def patience_out(history: list[dict], run: RunConfig) -> bool:
     """True when the val metric has not improved for ``patience_epochs`` epochs."""
     k = run.patience_epochs
     vals = [h.get("val_metric", float("nan")) for h in history]

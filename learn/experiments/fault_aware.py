@@ -58,27 +58,34 @@ QUICK_FA = FaultAwareScale(Scale(1, 300, 40, n_spots=(4,), radii_mm=(40.0,), pla
 
 def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int | None,
                       scale: FaultAwareScale, seed: int, progress: bool) -> dict:  # fmt: skip
-    """Fine-tune ``plain`` with faulty copies into ``out`` (reused when ``best.pt`` exists);
-    returns {checkpoint, minutes, train images}."""
+    """Fine-tune ``plain`` with faulty copies into ``out`` (reused when finished there, resumed
+    when stopped); returns {checkpoint, minutes, train images} (None when reused)."""
     from learn.checkpoint import load_checkpoint
+    from learn.experiments.models import train_once
     from learn.experiments.robustness_faults import augmented_data
-    from learn.train import fit, replace_train, run_from_dict
+    from learn.train import replace_train, run_from_dict
 
     recipe = {"from": str(plain), "epochs": epochs, "n_train": n_train, "seed": seed,
               "copies": scale.copies, "lr_factor": scale.lr_factor,
               "mix": dataclasses.asdict(scale.mix)}  # fmt: skip
-    if (out / "best.pt").is_file():
+    if (out / "last.pt").is_file() or (out / "best.pt").is_file():
         _check_recipe(out, recipe)
-        print(f"reusing {out / 'best.pt'}")
-        return {"checkpoint": str(out / "best.pt"), "minutes": None, "train_images": None}
     tic = time.perf_counter()
     run = run_from_dict(load_checkpoint(plain)["config"])
     run = replace_train(run, epochs=epochs, lr=run.train.lr * scale.lr_factor, seed=seed)
     run = dataclasses.replace(run, flips=False)
-    fa_data = augmented_data(data, run, n_train, scale.copies, scale.mix, seed, progress)
-    fit(run, fa_data, out, init_from=plain, progress=progress)
-    (out / RECIPE).write_text(json.dumps(recipe, indent=1))
-    return {"checkpoint": str(out / "best.pt"), "train_images": len(fa_data.train.y),
+    made: list = []  # the augmented data, when this call trains
+
+    def make_data():
+        made.append(augmented_data(data, run, n_train, scale.copies, scale.mix, seed, progress))
+        return made[0]
+
+    out.mkdir(parents=True, exist_ok=True)
+    (out / RECIPE).write_text(json.dumps(recipe, indent=1))  # before training, for a resume
+    best, trained = train_once(out, run, make_data, init_from=plain, progress=progress)
+    if not trained:
+        return {"checkpoint": str(best), "minutes": None, "train_images": None}
+    return {"checkpoint": str(best), "train_images": len(made[0].train.y),
             "minutes": (time.perf_counter() - tic) / 60, "epochs": epochs,
             "lr": run.train.lr}  # fmt: skip
 

@@ -10,6 +10,7 @@ robustness, pareto and fault-aware experiments can share one set of models.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from pathlib import Path
 
 from tactile.errors import ConfigError, DataError
@@ -48,7 +49,7 @@ def ensure_model(
     and ``seed`` changed when given). The model is trained into ``models_dir/<name or arch>`` and
     reused when ``best.pt`` is already there.
     """
-    from learn.train import fit, load_data
+    from learn.train import load_data
 
     if checkpoint is not None:
         checkpoint = Path(checkpoint)
@@ -59,12 +60,50 @@ def ensure_model(
     run = run if run is not None else preset_run(arch, epochs=epochs, seed=seed)
     if run.model.arch != arch:
         run = dataclasses.replace(run, model=dataclasses.replace(run.model, arch=arch))
-    if (out / "best.pt").is_file():
-        check_reusable(out / "best.pt", run)
-        print(f"reusing {out / 'best.pt'}")
-        return out / "best.pt"
-    fit(run, load_data(data, run, progress=progress), out, progress=progress)
-    return out / "best.pt"
+    return train_once(out, run, lambda: load_data(data, run, progress=progress),
+                      progress=progress)[0]  # fmt: skip
+
+
+def finished(out_dir: str | Path, run) -> bool:
+    """True when ``out_dir/last.pt`` ends ``run``: its schedule's last epoch is done, or
+    patience stopped it; False for a stopped (paused or killed) run, and without last.pt."""
+    from learn.checkpoint import LAST, load_checkpoint
+    from learn.train import patience_out
+
+    last = Path(out_dir) / LAST
+    if not last.is_file():
+        return False
+    ckpt = load_checkpoint(last)
+    return int(ckpt["epoch"]) >= run.train.epochs or patience_out(list(ckpt["history"]), run)
+
+
+def train_once(
+    out: Path,
+    run,
+    make_data: Callable[[], object],
+    *,
+    init_from: str | Path | None = None,
+    progress: bool = True,
+) -> tuple[Path, bool]:
+    """(``out/best.pt``, whether this call trained) for ``run`` trained into ``out``.
+
+    A finished run there is reused (and said so); a stopped one (killed, or paused mid-schedule)
+    resumes from its ``last.pt``, so a long experiment interrupted mid-training neither restarts
+    that model nor takes its half-trained weights as done; else ``make_data()`` is trained on.
+    ConfigError, before any work, when ``out`` holds a run of another configuration.
+    """
+    from learn.checkpoint import BEST, LAST
+    from learn.train import fit
+
+    last, best = out / LAST, out / BEST
+    check_reusable(last if last.is_file() else best, run)
+    if best.is_file() and (not last.is_file() or finished(out, run)):
+        print(f"reusing {best}")
+        return best, False
+    if last.is_file():
+        print(f"resuming the stopped run in {out}")
+    fit(run, make_data(), out, resume=True, init_from=init_from, progress=progress)
+    return best, True
 
 
 def check_reusable(path: Path, run) -> None:

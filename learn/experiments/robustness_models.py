@@ -113,16 +113,11 @@ def resolve_model(
     plan: TrainPlan, seed: int, progress: bool = True,
 ) -> Path:  # fmt: skip
     """Path of a checkpoint of ``arch``: the given one, or one trained as ``plan`` says."""
-    from learn.experiments.models import ensure_model
-    from learn.train import fit
+    from learn.experiments.models import ensure_model, train_once
 
     if checkpoint is not None or plan == FULL_PLAN:
         return ensure_model(arch, data, models_dir, checkpoint=checkpoint, seed=seed,
                             progress=progress)  # fmt: skip
-    out = Path(models_dir) / f"{arch}{plan.suffix}"
-    if (out / "best.pt").is_file():
-        print(f"reusing {out / 'best.pt'}")
-        return out / "best.pt"
-    run = plan_run(arch, plan, seed)
-    fit(run, split_data(data, run, plan.samples(arch), seed, progress)[0], out, progress=progress)
-    return out / "best.pt"
+    out, run = Path(models_dir) / f"{arch}{plan.suffix}", plan_run(arch, plan, seed)
+    return train_once(out, run, lambda: split_data(data, run, plan.samples(arch), seed,
+                                                   progress)[0], progress=progress)[0]  # fmt: skip

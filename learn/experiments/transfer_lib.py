@@ -160,17 +160,13 @@ def pretrain_data(pretrain: Path, target: Path, run, progress: bool):
 
 def synthetic_model(pretrain: Path, target: Path, model, models_dir: Path, s: TransferSettings,
                     progress: bool) -> Path:  # fmt: skip
-    """Checkpoint of the model trained on the synthetic end-effector set (reused if present)."""
-    from learn.experiments.models import check_reusable
-    from learn.train import fit
+    """Checkpoint of the model trained on the synthetic end-effector set (reused when finished,
+    resumed when stopped)."""
+    from learn.experiments.models import train_once
 
     out, run = models_dir / f"ee-synthetic-{model.arch}", pretrain_run(model, s)
-    check_reusable(out / "best.pt", run)
-    if (out / "best.pt").is_file():
-        print(f"reusing {out / 'best.pt'}")
-        return out / "best.pt"
-    fit(run, pretrain_data(pretrain, target, run, progress), out, progress=progress)
-    return out / "best.pt"
+    return train_once(out, run, lambda: pretrain_data(pretrain, target, run, progress),
+                      progress=progress)[0]  # fmt: skip
 
 
 def score(model_or_ckpt, test, num_classes: int) -> dict:
