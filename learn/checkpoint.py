@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from learn.inputs import INPUTS
-from tactile.errors import DataError
+from tactile.errors import ConfigError, DataError
 
 LAST, BEST = "last.pt", "best.pt"  # file names in a run folder
 REQUIRED_KEYS = ("model", "config", "epoch", "best_metric")
@@ -137,3 +137,15 @@ def load_checkpoint(path: str | Path) -> dict[str, object]:
     if missing:
         raise DataError(f"{path} lacks {missing}; it was not written by handskin train")
     return dict(ckpt)
+
+
+def check_no_overwrite(out: str | Path, resume: bool) -> None:
+    """ConfigError when run folder ``out`` holds a trained run (last.pt or best.pt) that a
+    fresh start (``resume`` False) would write over."""
+    out = Path(out)
+    if resume or not ((out / LAST).is_file() or (out / BEST).is_file()):
+        return
+    held = load_checkpoint(out / LAST if (out / LAST).is_file() else out / BEST)
+    raise ConfigError(f"{out} already holds a run ({held['config']['model']['arch']}, "
+                      f"{held['epoch']} epoch(s) done); training afresh would write over it. "
+                      "Fix: --resume to continue it, or another --out (or delete that folder)")

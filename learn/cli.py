@@ -152,7 +152,7 @@ def train_command(
 
 
 def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress) -> None:
-    from learn.checkpoint import versions
+    from learn.checkpoint import check_no_overwrite, versions
     from learn.crossval import cross_validate, cv_markdown, parse_grid
     from learn.evaluate import evaluate_tensors
     from learn.train import check_precision, check_stop, fit, load_data
@@ -163,6 +163,7 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
         raise ConfigError("--stop-after-epoch with --cv-grid: the grid's pick would be lost on "
                           "--resume. Fix: cross-validate first, then train the pick in parts")
     check_stop(stop, run, out, resume)
+    check_no_overwrite(out, resume)
     grid = parse_grid(cv_grid) if cv_grid else None
     if grid:
         cv = cross_validate(run, data, grid, k=cv_folds, hand_classes=hand)

@@ -112,8 +112,8 @@ def run_transfer(source: str | Path, target: str | Path, pretrain: str | Path, o
                  segmenter: str | Path | None = None, models_dir: str | Path | None = None,
                  notes: str = "", config: dict | None = None, progress: bool = True) -> dict:
     """Run Test C for classification (unless ``s.classification`` is off) and segmentation (if
-    asked or given); write ``out``/
-    report.md, results.json, curve_*.png. Returns the results dict {task: ...}."""
+    asked or given); write ``out``/report.md, results.json, curve_*.png. Returns the results
+    dict {task: ...}."""
     source, target, pretrain, out = Path(source), Path(target), Path(pretrain), Path(out)
     models = Path(models_dir) if models_dir else out / "models"
     tasks = {"classify": classifier} if s.classification else {}

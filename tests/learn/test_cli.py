@@ -58,7 +58,8 @@ def test_train_evaluate_predict(app, tiny_dataset, small_config, checkpoints, tm
 
 def test_train_in_parts_equals_one_run(app, tiny_dataset, small_config, tmp_path):
     """--stop-after-epoch then --resume gives the uninterrupted run's epochs and test scores;
-    the paused run writes no test scores, and a stop the resumed run has passed is refused."""
+    the paused run writes no test scores; a stop the resumed run has passed, and a fresh start
+    over the paused run, are refused."""
     base = ["train", str(tiny_dataset), "--config", str(small_config), "--no-progress"]
     whole, parts = tmp_path / "whole", tmp_path / "parts"
     assert runner.invoke(app, [*base, "--out", str(whole)]).exit_code == 0
@@ -67,6 +68,10 @@ def test_train_in_parts_equals_one_run(app, tiny_dataset, small_config, tmp_path
     assert (parts / "last.pt").is_file() and not (parts / "test_metrics.json").exists()
     res = runner.invoke(app, [*base, "--out", str(parts), "--resume", "--stop-after-epoch", "1"])
     assert res.exit_code == 2 and "already holds epoch 1" in res.output, res.output
+    stamp = (parts / "last.pt").stat().st_mtime_ns
+    res = runner.invoke(app, [*base, "--out", str(parts)])  # afresh would write over epoch 1
+    assert res.exit_code == 2 and "already holds a run" in res.output, res.output
+    assert (parts / "last.pt").stat().st_mtime_ns == stamp
     res = runner.invoke(app, [*base, "--out", str(parts), "--resume"])
     assert res.exit_code == 0, res.output
     a, b = (json.loads((d / "test_metrics.json").read_text()) for d in (whole, parts))
