@@ -237,3 +237,15 @@ def test_segmentation_tables_follow_table_15_layout():
     cells = row.strip("| ").split(" | ")
     ours = [f"{100 * metrics_from_cm(cm)[k]:.2f}" for k, _ in SEG_KEYS]
     assert cells[1:5] == ours and cells[5:] == ["unknown"] * 4
+
+
+def test_curve_chart_keeps_close_size_labels_apart():
+    """300 and all = 339 sit 0.05 decades apart: their tick labels lean away from each other
+    (as they did not, they overlapped); distant ones stay centred."""
+    from learn.experiments.transfer_report import curve_chart
+
+    points = [{"n": n, "metrics": {"mean_iou": 0.1 * k}} for k, n in enumerate((10, 300, 339))]
+    res = {"curve": {"scratch": points}, "zero_shot": {}}
+    ax = curve_chart(res, "mean_iou", "mean IoU").axes[0]
+    align = [t.get_horizontalalignment() for t in ax.get_xticklabels()]
+    assert align == ["center", "right", "left"]

@@ -76,7 +76,11 @@ def curve_chart(res: dict, key: str, label: str, what: str = "samples"):
                    label=f"{name} model, zero-shot (ours)")  # fmt: skip
     ax.set_xscale("log")
     sizes = [p["n"] for p in res["curve"]["scratch"]]
-    ax.set_xticks(sizes, [str(n) for n in sizes])
+    ticks = ax.set_xticks(sizes, [str(n) for n in sizes])
+    for a, b, n_a, n_b in zip(ticks, ticks[1:], sizes, sizes[1:], strict=False):
+        if n_b < 1.5 * n_a:  # close on the log axis (e.g. 300 and all = 339): labels apart
+            a.label1.set_horizontalalignment("right")
+            b.label1.set_horizontalalignment("left")
     ax.minorticks_off()
     ax.set(xlabel=f"end-effector training {what} N (log scale)", ylabel=f"test {label}, %",
            title=f"Test C learning curve: {label} on the end-effector test split")
