@@ -70,6 +70,9 @@ def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int
               "mix": dataclasses.asdict(scale.mix)}  # fmt: skip
     if (out / "last.pt").is_file() or (out / "best.pt").is_file():
         _check_recipe(out, recipe)
+    else:  # written before training, so a stopped run still matches it when resumed
+        out.mkdir(parents=True, exist_ok=True)
+        (out / RECIPE).write_text(json.dumps(recipe, indent=1))
     tic = time.perf_counter()
     run = run_from_dict(load_checkpoint(plain)["config"])
     run = replace_train(run, epochs=epochs, lr=run.train.lr * scale.lr_factor, seed=seed)
@@ -80,8 +83,6 @@ def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int
         made.append(augmented_data(data, run, n_train, scale.copies, scale.mix, seed, progress))
         return made[0]
 
-    out.mkdir(parents=True, exist_ok=True)
-    (out / RECIPE).write_text(json.dumps(recipe, indent=1))  # before training, for a resume
     best, trained = train_once(out, run, make_data, init_from=plain, progress=progress)
     if not trained:
         return {"checkpoint": str(best), "minutes": None, "train_images": None}
