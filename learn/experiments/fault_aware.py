@@ -59,7 +59,8 @@ QUICK_FA = FaultAwareScale(Scale(1, 300, 40, n_spots=(4,), radii_mm=(40.0,), pla
 def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int | None,
                       scale: FaultAwareScale, seed: int, progress: bool) -> dict:  # fmt: skip
     """Fine-tune ``plain`` with faulty copies into ``out`` (reused when finished there, resumed
-    when stopped); returns {checkpoint, minutes, train images} (None when reused)."""
+    when stopped); returns {checkpoint, minutes, train images} (None when reused), minutes
+    being the epochs' own training time summed over every part of a resumed run."""
     from learn.checkpoint import load_checkpoint
     from learn.experiments.models import train_once
     from learn.experiments.robustness_faults import augmented_data
@@ -73,7 +74,6 @@ def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int
     else:  # written before training, so a stopped run still matches it when resumed
         out.mkdir(parents=True, exist_ok=True)
         (out / RECIPE).write_text(json.dumps(recipe, indent=1))
-    tic = time.perf_counter()
     run = run_from_dict(load_checkpoint(plain)["config"])
     run = replace_train(run, epochs=epochs, lr=run.train.lr * scale.lr_factor, seed=seed)
     run = dataclasses.replace(run, flips=False)
@@ -83,11 +83,14 @@ def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int
         made.append(augmented_data(data, run, n_train, scale.copies, scale.mix, seed, progress))
         return made[0]
 
+    resumed = (out / "last.pt").is_file()
     best, trained = train_once(out, run, make_data, init_from=plain, progress=progress)
     if not trained:
         return {"checkpoint": str(best), "minutes": None, "train_images": None}
+    # the epochs' own seconds, summed over every part of a resumed run (not this call's clock)
+    seconds = sum(row["seconds"] for row in load_checkpoint(out / "last.pt")["history"])
     return {"checkpoint": str(best), "train_images": len(made[0].train.y),
-            "minutes": (time.perf_counter() - tic) / 60, "epochs": epochs,
+            "minutes": seconds / 60, "resumed": resumed, "epochs": epochs,
             "lr": run.train.lr}  # fmt: skip
 
 

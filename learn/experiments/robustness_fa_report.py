@@ -34,7 +34,7 @@ def _training(scale, trained: list[dict]) -> str:
     rows = [[t["name"], t["from"], t.get("epochs", "reused"), f"{t['lr']:g}" if "lr" in t else
              "reused",
              t["train_images"] if t["train_images"] is not None else "reused",
-             "reused" if t["minutes"] is None else f"{t['minutes']:.1f}"] for t in trained]
+             _minutes(t)] for t in trained]
     mix = ", ".join(f"{k} {v}" for k, v in dataclasses.asdict(scale.mix).items())
     return (
         f"Each fault-aware network starts from the plain one and is trained {scale.epochs} "
@@ -45,8 +45,15 @@ def _training(scale, trained: list[dict]) -> str:
         "network gets no extra epochs, "
         "so compare the 0 % rows too. Faults per copy: " + mix + ".\n\n"
         + markdown_table(["network", "initialised from", "epochs", "lr", "train images",
-                          "training (min)"], rows)
+                          "training (min, epochs' own)"], rows)
     )  # fmt: skip
+
+
+def _minutes(t: dict) -> str:
+    """A network's training minutes: "reused", or its epochs' time (all parts if resumed)."""
+    if t["minutes"] is None:
+        return "reused"
+    return f"{t['minutes']:.1f}" + (" (resumed; all parts)" if t.get("resumed") else "")
 
 
 def write_report(rep: Report, data, scale, models, prep, trained: list[dict],

@@ -124,6 +124,10 @@ def test_fault_aware_end_to_end(tiny_dataset, checkpoints, tmp_path):
     tuned = load_checkpoint(tmp_path / "models" / "handsnet_fault_aware" / "best.pt")
     assert any(not torch.equal(plain[k], v) for k, v in tuned["model"].items())
     assert [t["train_images"] for t in res["trained"]] == [16, 16]
+    last = tmp_path / "models" / "handsnet_fault_aware" / "last.pt"
+    hist = load_checkpoint(last)["history"]  # minutes: the epochs' own, from the run's history
+    assert res["trained"][0]["minutes"] == pytest.approx(sum(r["seconds"] for r in hist) / 60)
+    assert [t["resumed"] for t in res["trained"]] == [False, False]
     with pytest.raises(ConfigError, match="made otherwise"):  # another recipe, same folder
         fault_aware_model(checkpoints["handsnet"], tiny_dataset,
                           tmp_path / "models" / "handsnet_fault_aware", epochs=2, n_train=8,
