@@ -319,13 +319,23 @@ def _error_text(r: dict) -> list[str]:
             f"The {min(20, len(worst))} lowest (sample index, mIoU): {listed}.", ""]  # fmt: skip
 
 
+def _significance(rows: list[dict]) -> list[str]:
+    """The section on how sure the classifier rows' accuracies are (`learn.significance`)."""
+    from learn.significance import significance_markdown
+
+    pairs = [(r, lab) for r, lab in zip(rows, row_labels(rows), strict=True)
+             if r["task"] == "classify"]  # fmt: skip
+    return significance_markdown([r for r, _ in pairs], [lab for _, lab in pairs])
+
+
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:
     """The markdown report: our rows next to the paper's Tables 3 and 8 ("paper" columns;
     "unknown" where we do not know the paper's value), then per-model details."""
     lines = ["# handskin evaluation", "", header, "",
              "Columns marked *paper* are Albini & Cannata (IJRR 2020); ours are on the test split "
              "named above. Timing: median of 100 runs after 20 warm-up runs.", "",
-             *_table3(rows), "", *_table8(rows), "", "## Details", ""]  # fmt: skip
+             *_table3(rows), "", *_table8(rows), "", *_significance(rows), "## Details",
+             ""]  # fmt: skip
     for r, label in zip(rows, row_labels(rows), strict=True):
         lines += _details(r, label)
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")

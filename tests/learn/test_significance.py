@@ -1,0 +1,91 @@
+"""Accuracy intervals and McNemar's test against closed forms and slow reference sums."""
+
+from __future__ import annotations
+
+from math import comb
+
+import numpy as np
+import pytest
+
+from learn.eval_report import write_report
+from learn.evaluate import evaluate_checkpoint
+from learn.significance import accuracy_interval, mcnemar_p, paired, significance_markdown
+
+
+def _tail_at_least(k: int, n: int, p: float) -> float:
+    return sum(comb(n, i) * p**i * (1 - p) ** (n - i) for i in range(k, n + 1))
+
+
+def _reference_interval(k: int, n: int, alpha: float = 0.05) -> tuple[float, float]:
+    """Clopper–Pearson by bisection on exact binomial tail sums: the lower end is the p at
+    which P(X >= k) = alpha / 2, the upper the p at which P(X <= k) = alpha / 2."""
+
+    def solve(f, target):  # f increasing in p on [0, 1]
+        lo, hi = 0.0, 1.0
+        for _ in range(60):
+            mid = (lo + hi) / 2
+            lo, hi = (mid, hi) if f(mid) < target else (lo, mid)
+        return (lo + hi) / 2
+
+    low = 0.0 if k == 0 else solve(lambda p: _tail_at_least(k, n, p), alpha / 2)
+    high = 1.0 if k == n else solve(lambda p: _tail_at_least(k + 1, n, p), 1 - alpha / 2)
+    return low, high
+
+
+def test_interval_closed_forms():
+    n = 40  # all right: the lower end is (alpha / 2) ** (1 / n); none right: mirrored
+    assert accuracy_interval(n, n) == pytest.approx((0.025 ** (1 / n), 1.0))
+    assert accuracy_interval(0, n) == pytest.approx((0.0, 1 - 0.025 ** (1 / n)))
+
+
+@pytest.mark.parametrize("k, n", [(1, 7), (50, 100), (91, 100), (966, 1052), (3, 500)])
+def test_interval_matches_the_slow_reference(k, n):
+    assert accuracy_interval(k, n) == pytest.approx(_reference_interval(k, n), abs=1e-9)
+    lo, hi = accuracy_interval(k, n)  # and the interval of the errors is its mirror
+    assert accuracy_interval(n - k, n) == pytest.approx((1 - hi, 1 - lo), abs=1e-12)
+
+
+def test_interval_refuses_impossible_counts():
+    with pytest.raises(ValueError, match="n_correct <= n"):
+        accuracy_interval(11, 10)
+
+
+def _reference_mcnemar(b: int, c: int) -> float:
+    n = b + c
+    return min(1.0, 2 * sum(comb(n, i) for i in range(min(b, c) + 1)) / 2**n)
+
+
+@pytest.mark.parametrize("b, c", [(1, 9), (9, 1), (15, 5), (36, 19), (7, 7), (0, 3), (0, 0)])
+def test_mcnemar_matches_the_exact_binomial_sum(b, c):
+    assert mcnemar_p(b, c) == pytest.approx(_reference_mcnemar(b, c), rel=1e-12)
+
+
+def _row(wrong: range, n: int = 100) -> dict:
+    """A two-class classifier row that gets the samples ``wrong`` wrong (all true class 0)."""
+    return {"task": "classify", "cm": [[n - len(wrong), len(wrong)], [0, 0]],
+            "errors": [{"index": int(i)} for i in wrong]}  # fmt: skip
+
+
+def test_paired_counts_and_markdown():
+    a, b = _row(range(10)), _row(range(5, 25))  # A: 90 %, B: 80 %; they share 5 errors
+    c = paired(a, b)
+    assert (c["only_a_right"], c["only_b_right"]) == (15, 5)
+    assert c["difference"] == pytest.approx(0.10) and c["p"] == pytest.approx(
+        _reference_mcnemar(15, 5))
+    text = "\n".join(significance_markdown([a, b], ["A", "B"]))
+    lo, hi = _reference_interval(90, 100)
+    assert f"| A | 100 | 90.00 | {100 * lo:.2f}–{100 * hi:.2f} |" in text
+    assert f"| A | B | +10.00 | 15 | 5 | {_reference_mcnemar(15, 5):.3f} |" in text
+    # a row that lists no errors keeps its interval but is left out of the pairs
+    alone = "\n".join(significance_markdown([a, {"cm": b["cm"]}], ["A", "B"]))
+    assert "| B | 100 | 80.00 |" in alone and "McNemar" not in alone
+
+
+def test_report_has_the_section(checkpoints, tiny_dataset, tmp_path):
+    row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3)
+    same = dict(row, checkpoint="/runs/b/best.pt")  # the same predictions: nothing to tell
+    text = write_report([row, same], tmp_path / "r.md").read_text()
+    cm = np.asarray(row["cm"])
+    assert "## Classification: how sure the accuracies are" in text
+    assert f"| {cm.sum()} | {100 * np.trace(cm) / cm.sum():.2f} |" in text
+    assert "| 0 | 0 | 1.000 |" in text
