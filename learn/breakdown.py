@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from learn.significance import batched_mean_iou, per_image_confusion
+
 #: A segmenter's worst test images kept in its report row, and how many of them (the first)
 #: carry their predicted label maps for the report's picture.
 N_WORST_KEPT, N_WORST_MAPS = 50, 9
@@ -319,11 +321,13 @@ def svm_margin(scores: np.ndarray) -> np.ndarray:
 
 def worst_segmentations(
     pred: np.ndarray, truth: np.ndarray, indices: Sequence[int], num_classes: int,
-    about: dict[str, Sequence] | None = None,
+    about: dict[str, Sequence] | None = None, cms: np.ndarray | None = None,
 ) -> tuple[list[dict[str, object]], np.ndarray]:  # fmt: skip
     """Every test image scored on its own, lowest mIoU first (ties by pixel accuracy, then
     test order): where a segmenter fails. pred, truth : (S, h, w) int class ids; indices :
-    (S,) dataset sample indices; ``about`` : named (S,) sequences copied into each record.
+    (S,) dataset sample indices; ``about`` : named (S,) sequences copied into each record;
+    ``cms`` : the images' (S, C, C) confusion matrices when the caller has them already
+    (`learn.significance.per_image_confusion`).
 
     Each image's mIoU and pixel accuracy follow Long et al. on its own confusion matrix:
     classes absent from its ground truth are skipped in the mean, so a finger painted where
@@ -334,15 +338,10 @@ def worst_segmentations(
     pred, truth = np.asarray(pred), np.asarray(truth)
     if pred.shape != truth.shape or pred.ndim != 3:
         raise ValueError(f"pred {pred.shape} and truth {truth.shape} must be equal (S, h, w)")
-    s, c = len(truth), num_classes
-    codes = (np.arange(s)[:, None] * c * c + truth.reshape(s, -1).astype(np.int64) * c
-             + pred.reshape(s, -1))  # fmt: skip
-    cm = np.bincount(codes.ravel(), minlength=s * c * c).reshape(s, c, c).astype(np.float64)
-    n_ii, t_i, p_i = np.diagonal(cm, axis1=1, axis2=2), cm.sum(2), cm.sum(1)
-    present = t_i > 0
-    iou = np.divide(n_ii, t_i + p_i - n_ii, out=np.zeros_like(n_ii), where=present)
-    miou = (iou * present).sum(1) / present.sum(1)
-    acc = n_ii.sum(1) / t_i.sum(1)
+    s = len(truth)
+    cm = per_image_confusion(pred, truth, num_classes) if cms is None else cms
+    miou = batched_mean_iou(cm)
+    acc = np.diagonal(cm, axis1=1, axis2=2).sum(1) / cm.sum((1, 2))
     order = np.lexsort((np.arange(s), acc, miou))
     about = about or {}
     records = [{"index": int(indices[k]), "mean_iou": float(miou[k]),

@@ -320,12 +320,13 @@ def _error_text(r: dict) -> list[str]:
 
 
 def _significance(rows: list[dict]) -> list[str]:
-    """The section on how sure the classifier rows' accuracies are (`learn.significance`)."""
-    from learn.significance import significance_markdown
+    """The sections on how sure the rows' accuracies and mIoUs are (`learn.significance`)."""
+    from learn.significance import segmentation_markdown, significance_markdown
 
-    pairs = [(r, lab) for r, lab in zip(rows, row_labels(rows), strict=True)
-             if r["task"] == "classify"]  # fmt: skip
-    return significance_markdown([r for r, _ in pairs], [lab for _, lab in pairs])
+    labels = row_labels(rows)
+    clf = [(r, lab) for r, lab in zip(rows, labels, strict=True) if r["task"] == "classify"]
+    return [*significance_markdown([r for r, _ in clf], [lab for _, lab in clf]),
+            *segmentation_markdown(rows, labels)]  # fmt: skip
 
 
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:

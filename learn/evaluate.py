@@ -266,6 +266,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     )
     from learn.ensemble import MeanSoftmax
     from learn.folder import is_dataset, materialize, open_split
+    from learn.significance import mean_iou_interval, per_image_confusion
 
     first, run = members[0], members[0].run
     views = [tta_views(m.run, m.path) for m in members] if tta else None
@@ -285,7 +286,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     classify_data = run.task == "classify" and on_dataset
     model = build(lambda m: m)
     ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
-    seg_groups = worst = None
+    seg_groups = worst = miou_interval = None
     found = dict.fromkeys(("by_active_taxels", "by_contactor", "hands_by_parts",
                            "hands_by_action", "errors"))
     if classify_data:  # accuracy by contact size and by contactor, most confident errors
@@ -301,10 +302,13 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
                                                n_cls),
             "action": segmentation_by_group(pred, y, actions, n_cls),
             "hand parts touching": segmentation_by_group(pred, y, parts, n_cls, by_name=True)}
+        cms = per_image_confusion(pred, y, n_cls)
         worst, order = worst_segmentations(pred, y, split.indices, n_cls,
-                                           {"action": actions, "hand parts touching": parts})
+                                           {"action": actions, "hand parts touching": parts},
+                                           cms)  # fmt: skip
         worst = {"images": worst[:N_WORST_KEPT],
                  "maps": pack_labels(pred[order[:N_WORST_MAPS]])}  # fmt: skip
+        miou_interval = list(mean_iou_interval(cms))
     fast = build(lambda m: fast_inference(m, check=test.x[:64]))
     res = evaluate_tensors(fast, test, n_cls)
     if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
@@ -325,6 +329,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "init": ckpt.get("init"),
            "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
            **found, "segmentation_by_group": seg_groups, "worst": worst,
+           "mean_iou_interval": miou_interval,
            "tta_views": views and views[0]}  # fmt: skip
     return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
 

@@ -1,4 +1,5 @@
-"""Accuracy intervals and McNemar's test against closed forms and slow reference sums."""
+"""Accuracy intervals, McNemar's test and the mIoU bootstrap against closed forms and slow
+references."""
 
 from __future__ import annotations
 
@@ -6,10 +7,20 @@ from math import comb
 
 import numpy as np
 import pytest
+import torch
 
+from learn import metrics as M
 from learn.eval_report import write_report
 from learn.evaluate import evaluate_checkpoint
-from learn.significance import accuracy_interval, mcnemar_p, paired, significance_markdown
+from learn.significance import (
+    accuracy_interval,
+    batched_mean_iou,
+    mcnemar_p,
+    mean_iou_interval,
+    paired,
+    per_image_confusion,
+    significance_markdown,
+)
 
 
 def _tail_at_least(k: int, n: int, p: float) -> float:
@@ -89,3 +100,54 @@ def test_report_has_the_section(checkpoints, tiny_dataset, tmp_path):
     assert "## Classification: how sure the accuracies are" in text
     assert f"| {cm.sum()} | {100 * np.trace(cm) / cm.sum():.2f} |" in text
     assert "| 0 | 0 | 1.000 |" in text
+
+
+def test_batched_mean_iou_matches_the_metric_function():
+    rng = np.random.default_rng(0)
+    cms = rng.integers(0, 50, size=(20, 7, 7)).astype(np.float64)
+    cms[::3, 4, :] = 0  # class 4 absent from the truth of every third matrix: skipped
+    cms[::5, :, 2] = 0  # and class 2 never predicted in others
+    expected = [M.mean_iou(torch.tensor(cm)) for cm in cms]
+    assert batched_mean_iou(cms) == pytest.approx(expected, rel=1e-12)
+
+
+def test_per_image_confusion_counts_pixels():
+    rng = np.random.default_rng(1)
+    pred, truth = rng.integers(0, 4, (5, 6, 7)), rng.integers(0, 4, (5, 6, 7))
+    cms = per_image_confusion(pred, truth, 4)
+    for k in range(5):  # one image at a time, the slow way
+        slow = np.zeros((4, 4))
+        for t, p in zip(truth[k].ravel(), pred[k].ravel(), strict=True):
+            slow[t, p] += 1
+        assert np.array_equal(cms[k], slow)
+
+
+def test_mean_iou_interval_against_a_slow_bootstrap():
+    """The vectorised bootstrap against a loop that resamples image indices its own way: the
+    two ends agree within 0.5 mIoU points (2,000 resamples each, fixed seeds), and the interval
+    holds the pooled mIoU; identical images leave no spread."""
+    rng = np.random.default_rng(2)
+    s = 300
+    hit = rng.uniform(0.3, 0.95, s)  # images of uneven difficulty
+    cms = np.zeros((s, 3, 3))
+    cms[:, 0, 0] = 500
+    cms[:, 1, 1], cms[:, 1, 2] = 100 * hit, 100 * (1 - hit)
+    cms[:, 2, 2], cms[:, 2, 1] = 80 * hit[::-1], 80 * (1 - hit[::-1])
+    lo, hi = mean_iou_interval(cms, resamples=2000)
+    slow_rng = np.random.default_rng(99)
+    boot = [M.mean_iou(torch.tensor(cms[slow_rng.integers(0, s, s)].sum(0)))
+            for _ in range(2000)]
+    ref_lo, ref_hi = np.quantile(boot, [0.025, 0.975])
+    assert lo == pytest.approx(ref_lo, abs=0.005) and hi == pytest.approx(ref_hi, abs=0.005)
+    assert lo < M.mean_iou(torch.tensor(cms.sum(0))) < hi and hi - lo > 0.01
+    same = np.repeat(cms[:1], 50, axis=0)
+    assert mean_iou_interval(same) == pytest.approx((M.mean_iou(torch.tensor(same[0])),) * 2)
+
+
+def test_segmenter_row_carries_its_interval(checkpoints, tiny_dataset, tmp_path):
+    row = evaluate_checkpoint(checkpoints["segnet"], tiny_dataset, time_runs=3)
+    lo, hi = row["mean_iou_interval"]
+    assert lo <= row["metrics"]["mean_iou"] <= hi
+    text = write_report([row], tmp_path / "r.md").read_text()
+    assert "## Segmentation: how sure the mIoUs are" in text
+    assert f"| {100 * row['metrics']['mean_iou']:.2f} | {100 * lo:.2f}–{100 * hi:.2f} |" in text
