@@ -91,7 +91,8 @@ def paired(a: dict, b: dict) -> dict[str, float]:
 def _paired_rows(rows: list[dict], labels: list[str]) -> list[tuple[dict, str]]:
     """The rows (with labels) that list their errors by sample index, when they all have as
     many test samples (one `handskin evaluate` run on a handskin dataset: one test split)."""
-    listed = [(r, lab) for r, lab in zip(rows, labels, strict=True) if "errors" in r]
+    listed = [(r, lab) for r, lab in zip(rows, labels, strict=True)
+              if r.get("errors") is not None]  # None: scored on image folders, not listed
     return listed if len({int(np.sum(r["cm"])) for r, _ in listed}) == 1 else []
 
 

@@ -88,8 +88,9 @@ def test_paired_counts_and_markdown():
     assert f"| A | 100 | 90.00 | {100 * lo:.2f}–{100 * hi:.2f} |" in text
     assert f"| A | B | +10.00 | 15 | 5 | {_reference_mcnemar(15, 5):.3f} |" in text
     # a row that lists no errors keeps its interval but is left out of the pairs
-    alone = "\n".join(significance_markdown([a, {"cm": b["cm"]}], ["A", "B"]))
-    assert "| B | 100 | 80.00 |" in alone and "McNemar" not in alone
+    for unlisted in ({"cm": b["cm"]}, {"cm": b["cm"], "errors": None}):  # None: image folders
+        alone = "\n".join(significance_markdown([a, unlisted], ["A", "B"]))
+        assert "| B | 100 | 80.00 |" in alone and "McNemar" not in alone
 
 
 def test_report_has_the_section(checkpoints, tiny_dataset, tmp_path):
