@@ -41,13 +41,14 @@ TTA_SUFFIX = " + test-time flips"
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
     test-time flips); where two rows would share a label, the input size, then the width
-    multiplier, the training epochs, the training precision, the seed (each when theirs
-    differ), then the training data, then the run folder, added."""
+    multiplier, the training epochs, the training precision, the training views, the seed (each
+    when theirs differ), then the training data, then the run folder, added."""
     labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
     for extra, only_if_differs in ((size_label, True),
                                    (lambda r: width_label(r) or "default width", True),
                                    (epochs_label, True),
                                    (precision_label, True),
+                                   (views_label, True),
                                    (lambda r: f"seed {r.get('seed')}", True),
                                    (data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False)):
@@ -99,6 +100,14 @@ def trained_precision(r: dict) -> str:
 def precision_label(r: dict) -> str:
     """``<fp32|bf16> training``, a report row's `trained_precision` as a label."""
     return f"{trained_precision(r)} training"
+
+
+def views_label(r: dict) -> str:
+    """The training views of a report row's network: ``no flips``, ``flips`` (the paper's
+    three views) or ``flips + 180°`` (`learn.train.RunConfig.rot180`, a fourth)."""
+    cfg = r.get("config") or {}
+    flips = "flips" if cfg.get("flips", True) else "no flips"
+    return flips + (" + 180°" if cfg.get("rot180") else "")
 
 
 def width_label(r: dict) -> str | None:

@@ -257,6 +257,10 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     assert row_labels([s0, s1, dict(bf16, seed=1)]) == [
         "SegNet, fp32 training, seed 0", "SegNet, fp32 training, seed 1",
         "SegNet, bf16 training"]  # fmt: skip
+    # ... or trained on a fourth view (the 180-degree turn), seeds included
+    turn = dict(s1, config={**long["config"], "rot180": True}, checkpoint="/r/t/best.pt")
+    assert row_labels([s0, s1, turn]) == [
+        "SegNet, flips, seed 0", "SegNet, flips, seed 1", "SegNet, flips + 180°"]
     assert "bfloat16" in _init_text(dict(bf16, init="random"))
     assert "bfloat16" not in _init_text(dict(long, init="random"))
     # ensembles: a repeated method is counted, and seed replicates name their seeds
