@@ -101,11 +101,10 @@ def significance_markdown(rows: list[dict], labels: list[str]) -> list[str]:
     interval and, when the rows share their test samples, every pair's McNemar test."""
     if not rows:
         return []
-    out = ["## Classification: how sure the accuracies are", "",
-           f"Each accuracy with its exact {100 * LEVEL:g} % binomial (Clopper–Pearson) "
-           "interval over the test samples:", "",
-           f"| method | test samples | accuracy % | {100 * LEVEL:g} % interval % |",
-           "|---|---|---|---|"]  # fmt: skip
+    out = _interval_head("Classification: how sure the accuracies are",
+                         f"Each accuracy with its exact {100 * LEVEL:g} % binomial "
+                         "(Clopper–Pearson) interval over the test samples:",
+                         "test samples", "accuracy %")  # fmt: skip
     for r, lab in zip(rows, labels, strict=True):
         cm = np.asarray(r["cm"])
         k, n = int(np.trace(cm)), int(cm.sum())
@@ -136,16 +135,21 @@ def segmentation_markdown(rows: list[dict], labels: list[str]) -> list[str]:
     shown = [(r, lab) for r, lab in zip(rows, labels, strict=True) if r.get("mean_iou_interval")]
     if not shown:
         return []
-    out = ["## Segmentation: how sure the mIoUs are", "",
-           f"Each mIoU with its {100 * LEVEL:g} % percentile bootstrap interval ({N_RESAMPLES:,} "
-           "resamples of the test images, seeded):", "",
-           f"| method | test images | mIoU % | {100 * LEVEL:g} % interval % |",
-           "|---|---|---|---|"]  # fmt: skip
+    out = _interval_head("Segmentation: how sure the mIoUs are",
+                         f"Each mIoU with its {100 * LEVEL:g} % percentile bootstrap interval "
+                         f"({N_RESAMPLES:,} resamples of the test images, seeded):",
+                         "test images", "mIoU %")  # fmt: skip
     for r, lab in shown:
         lo, hi = r["mean_iou_interval"]
         out.append(f"| {lab} | {r['n_test']:,} | {100 * r['metrics']['mean_iou']:.2f} | "
                    f"{100 * lo:.2f}–{100 * hi:.2f} |")
     return [*out, ""]
+
+
+def _interval_head(title: str, sentence: str, count: str, score: str) -> list[str]:
+    """A section's heading, its sentence and the head of its table of intervals."""
+    return [f"## {title}", "", sentence, "",
+            f"| method | {count} | {score} | {100 * LEVEL:g} % interval % |", "|---|---|---|---|"]
 
 
 def _p(p: float) -> str:
