@@ -67,9 +67,14 @@ class TrainConfig:
     # per-layer lr factors, selector -> factor (learn.finetune.param_groups); 0 freezes
     lr_factors: Mapping[str, float] = field(default_factory=dict, hash=False)
     seed: int = 0  # torch / numpy seed of the run
+    # per-step decay of an exponential moving average of the weights (learn.averaging), which is
+    # then what is validated, selected and saved; 0 = off (the raw weights, the paper's way)
+    ema_decay: float = 0.0
 
     def __post_init__(self) -> None:
         _require(self.optimizer in ("sgdm", "adam"), "TrainConfig.optimizer: sgdm or adam")
+        _require(0 <= self.ema_decay < 1, f"TrainConfig.ema_decay must be in [0, 1), not "
+                 f"{self.ema_decay}. Fix: 0 (off) or e.g. 0.998 (an average of ~500 steps)")
         _require(self.lr > 0 and self.weight_decay >= 0, "TrainConfig: lr > 0, weight_decay >= 0")
         _require(0 < self.lr_drop_factor <= 1, "TrainConfig.lr_drop_factor must be in (0, 1]")
         _require(self.lr_drop_period_epochs >= 1, "TrainConfig.lr_drop_period_epochs >= 1")

@@ -14,17 +14,17 @@ reseeds torch from ``(seed, e)``, so a resumed run equals an uninterrupted one o
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
 from torch import nn
 from tqdm.auto import tqdm
 
+from learn.averaging import make_ema
 from learn.checkpoint import (
     BEST,
     LAST,
@@ -33,64 +33,23 @@ from learn.checkpoint import (
     make_checkpoint,
     save_checkpoint,
 )
-from learn.config import HANDSNET, ModelConfig, TrainConfig
 from learn.evaluate import bf16_supported, evaluate_tensors, plot_history
 from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
 from learn.losses import SegmentationLoss
 from learn.models import create_model
+from learn.run_config import (  # noqa: F401 (re-exported: learn.train is where runs are made)
+    PRECISIONS,
+    TASK_OF_ARCH,
+    RunConfig,
+    load_run_config,
+    metric_name,
+    replace_train,
+    run_from_dict,
+)
 from learn.tta import PAPER_VIEWS, VIEW_DIMS
-from tactile.config import from_dict, read_toml, to_dict, to_toml
+from tactile.config import to_dict, to_toml
 from tactile.errors import ConfigError
-
-PRECISIONS = ("fp32", "bf16")  # RunConfig.precision: the training forward pass's number format
-TASK_OF_ARCH = {"handsnet": "classify", "vgg16": "classify", "segnet": "segment",
-                "fcn16s": "segment"}  # fmt: skip
-
-
-@dataclass(frozen=True)
-class RunConfig:
-    """A whole training run: model, optimisation, and how the data are used."""
-
-    model: ModelConfig = field(default_factory=lambda: HANDSNET.model)
-    train: TrainConfig = field(default_factory=lambda: HANDSNET.train)
-    val_fraction: float = 0.15  # share of the train split's subjects/instances held out
-    patience_epochs: int = 0  # early stopping after this many epochs without a better val metric
-    # the paper's threefold augmentation (False: originals only). Measured on the paper-sized
-    # forearm set at equal steps, without flips: HandsNet 88.97 % (91.83 % with), SegNet mIoU
-    # 52.0 % (53.5 %): right hands 55.0 % (52.8 %), left hands 37.4 % (58.1 %). Most hands are
-    # right hands; the flips are how a segmenter learns the left ones.
-    flips: bool = True
-    # one more view, both flips: a 180-degree turn. A single flip mirrors a print, so a right
-    # hand looks like a left one with the same part labels; the turn keeps its chirality.
-    # SegNet with it, same steps: 52.8 % mIoU (53.5 % without), so it is off by default.
-    rot180: bool = False
-    threads: int = 2  # torch CPU threads (the project's machines have 2 shared cores)
-    # number format of the training forward pass: "fp32", or "bf16" to autocast convolutions and
-    # matrix products to bfloat16 (torch.autocast) while weights, optimizer state, loss and
-    # validation stay float32; needs a CPU with native bf16 (AVX512-BF16 / AMX, `check_precision`)
-    precision: str = "fp32"
-    eval_batch_size: int = 64  # images per evaluation forward pass
-
-    def __post_init__(self) -> None:
-        if self.model.arch not in TASK_OF_ARCH:
-            raise ConfigError(f"unknown arch {self.model.arch!r}; choose one of: "
-                              f"{', '.join(sorted(TASK_OF_ARCH))}")  # fmt: skip
-        if not 0.0 <= self.val_fraction < 1.0:
-            raise ConfigError(f"RunConfig.val_fraction must be in [0, 1), not {self.val_fraction}")
-        if self.patience_epochs < 0 or self.threads < 1 or self.eval_batch_size < 1:
-            raise ConfigError("RunConfig: patience_epochs >= 0, threads >= 1, eval_batch_size >= 1")
-        if self.precision not in PRECISIONS:
-            raise ConfigError(
-                f"RunConfig.precision {self.precision!r} is not one of {', '.join(PRECISIONS)}. "
-                'Fix: precision = "fp32" (the default) or "bf16" (faster on CPUs with native '
-                "bfloat16)"
-            )
-
-    @property
-    def task(self) -> str:
-        """``"classify"`` or ``"segment"``, from the architecture."""
-        return TASK_OF_ARCH[self.model.arch]
 
 
 @dataclass
@@ -102,11 +61,6 @@ class FitResult:
     best_metric: float
     out_dir: Path | None
     paused: bool = False  # stopped by ``stop_after_epoch`` before the schedule's last epoch
-
-
-def metric_name(task: str) -> str:
-    """The validation metric that selects the best epoch: accuracy or mean IoU."""
-    return "accuracy" if task == "classify" else "mean_iou"
 
 
 def epoch_seed(seed: int, epoch: int) -> int:
@@ -211,9 +165,9 @@ def _state(model: nn.Module) -> dict[str, torch.Tensor]:
     return {k: v.detach().clone() for k, v in model.state_dict().items()}
 
 
-def _restore(out: Path, run: RunConfig, model, optimizer, scheduler):
+def _restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None):
     """(start epoch, best metric, history, best weights, recorded start) of the run in ``out``
-    (last.pt)."""
+    (last.pt); loads the weights, optimizer, schedule and weight average (``ema``) in place."""
     ckpt = load_checkpoint(out / LAST)
     try:  # keys added since the checkpoint was written take their defaults (the old behaviour)
         theirs = to_dict(run_from_dict(ckpt["config"]))
@@ -232,6 +186,8 @@ def _restore(out: Path, run: RunConfig, model, optimizer, scheduler):
     model.load_state_dict(ckpt["model"])
     optimizer.load_state_dict(ckpt["optimizer"])
     scheduler.load_state_dict(ckpt["scheduler"])
+    if ema is not None:
+        ema.load_state_dict(ckpt["ema"])
     best_state = load_checkpoint(out / BEST)["model"] if (out / BEST).is_file() else _state(model)
     return (int(ckpt["epoch"]), float(ckpt["best_metric"]), list(ckpt["history"]), best_state,
             ckpt.get("init"))  # fmt: skip
@@ -262,15 +218,20 @@ def fit(
     resumes) is done, to split a long run; the schedule stays that of ``run.train.epochs`` and
     ``resume`` continues it. ConfigError if it is below 1 or not after the resumed epoch.
     on_epoch : called as ``on_epoch(epoch, optimizer)`` before each epoch's training.
+    With ``run.train.ema_decay`` the weight average (``learn.averaging``) is validated, saved as
+    best.pt and returned; last.pt keeps the raw weights and the average (``"ema"``) to resume.
     """
     check_precision(run)
     torch.set_num_threads(run.threads)
     out = None if out_dir is None else Path(out_dir)
     model, optimizer, scheduler = build(run, init_from)
+    ema = make_ema(model, optimizer, run.train.ema_decay)
+    scored = model if ema is None else ema.module  # the weights validated, selected and kept
     loss_fn = make_loss(run, data.train)
     start, best, history, best_state = 0, float("nan"), [], _state(model)
     if resume and out is not None and (out / LAST).is_file():
-        start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler)
+        start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler,
+                                                           ema)  # fmt: skip
         init_from = first if first not in (None, "random") else init_from
     _check_stop(stop_after_epoch, start, run.train.epochs, None if out is None else out / LAST)
     if out is not None:
@@ -280,15 +241,16 @@ def fit(
     for epoch in range(start, run.train.epochs):
         if on_epoch is not None:
             on_epoch(epoch, optimizer)
-        row = _one_epoch(model, data, loss_fn, optimizer, run, epoch, progress)
+        row = _one_epoch(model, data, loss_fn, optimizer, run, epoch, progress, scored)
         scheduler.step()
         history.append(row)
         if _improved(row.get("val_metric", float("nan")), best) or data.val is None:
             best = row.get("val_metric", best)
-            best_state = _state(model)
-            _save(out, BEST, model, optimizer, scheduler, run, data, epoch, best, history,
+            best_state = _state(scored)
+            _save(out, BEST, scored, optimizer, scheduler, run, data, epoch, best, history,
                   init_from)
-        _save(out, LAST, model, optimizer, scheduler, run, data, epoch, best, history, init_from)
+        _save(out, LAST, model, optimizer, scheduler, run, data, epoch, best, history, init_from,
+              ema=ema)
         if out is not None:
             title = f"{run.model.arch}, seed {run.train.seed}"
             plot_history(history, out / "curves.png", title, metric_name(run.task))
@@ -298,8 +260,8 @@ def fit(
             paused = epoch + 1 < run.train.epochs
             break
     if data.val is not None:
-        model.load_state_dict(best_state)
-    return FitResult(model, history, best, out, paused)
+        scored.load_state_dict(best_state)
+    return FitResult(scored, history, best, out, paused)
 
 
 def check_stop(stop_after_epoch: int | None, run: RunConfig, out_dir: str | Path | None = None,
@@ -327,13 +289,16 @@ def _check_stop(stop_after_epoch: int | None, start: int, epochs: int, last: Pat
         )
 
 
-def _one_epoch(model, data: Data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool):
-    """Train one epoch and validate: a history row (losses, val metric, lr of each group)."""
+def _one_epoch(model, data: Data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool,
+               scored: nn.Module | None = None):  # fmt: skip
+    """Train one epoch and validate ``scored`` (default ``model``; the weight average when there
+    is one): a history row (losses, val metric, lr of each group)."""
     tic = time.perf_counter()
     row = {"epoch": epoch + 1, "lr": [g["lr"] for g in optimizer.param_groups]}
     row["train_loss"] = train_epoch(model, data.train, loss_fn, optimizer, run, epoch, progress)
     if data.val is not None:
-        res = evaluate_tensors(model, data.val, run.model.num_classes, run.eval_batch_size, loss_fn)
+        res = evaluate_tensors(model if scored is None else scored, data.val,
+                               run.model.num_classes, run.eval_batch_size, loss_fn)
         row["val_loss"], row["val_metric"] = res.loss, res.metrics[metric_name(run.task)]
     row["seconds"] = time.perf_counter() - tic
     return row
@@ -349,51 +314,14 @@ def patience_out(history: list[dict], run: RunConfig) -> bool:
 
 
 def _save(out, name, model, optimizer, scheduler, run, data: Data, epoch, best, history,
-          init_from=None) -> None:  # fmt: skip
+          init_from=None, ema=None) -> None:  # fmt: skip
     if out is None:
         return
+    extra = {} if ema is None else {"ema": ema.state_dict()}  # last.pt: to resume the average
     ckpt = make_checkpoint(
         model, to_dict(run), epoch=epoch + 1, best_metric=best, optimizer=optimizer,
         scheduler=scheduler, history=history, class_names=list(data.class_names),
         seed=run.train.seed, task=run.task, data=data.description,
-        init="random" if init_from is None else str(init_from),
+        init="random" if init_from is None else str(init_from), **extra,
     )  # fmt: skip
     save_checkpoint(ckpt, out / name)
-
-
-def replace_train(run: RunConfig, **changes: object) -> RunConfig:
-    """A copy of ``run`` with TrainConfig fields changed (validated)."""
-    return dataclasses.replace(run, train=dataclasses.replace(run.train, **changes))
-
-
-def _merge(base: dict, table: Mapping) -> dict:
-    """``base`` with ``table``'s keys laid over it, recursively for sub-tables."""
-    out = dict(base)
-    for key, value in table.items():
-        nested = isinstance(value, Mapping) and isinstance(base.get(key), dict)
-        nested = nested and key != "lr_factors"
-        out[key] = _merge(base[key], value) if nested else value
-    return out
-
-
-def run_from_dict(table: Mapping, base: RunConfig | None = None) -> RunConfig:
-    """RunConfig from a nested dict (TOML tables ``[model]``, ``[train]`` and top-level keys)
-    laid over ``base`` (default RunConfig()); unknown keys and bad values raise ConfigError."""
-    table = _merge(to_dict(base or RunConfig()), table)
-    train = dict(table.get("train") or {})
-    factors = train.pop("lr_factors", {}) or {}
-    if not isinstance(factors, Mapping) or not all(
-        isinstance(v, int | float) and not isinstance(v, bool) for v in factors.values()
-    ):
-        raise ConfigError(f"train.lr_factors: expected a table selector = factor, got {factors!r}")
-    run = from_dict(RunConfig, {**table, "train": train})
-    return replace_train(run, lr_factors={str(k): float(v) for k, v in factors.items()})
-
-
-def load_run_config(path: str | Path, base: RunConfig | None = None) -> RunConfig:
-    """A TOML run configuration laid over ``base``; ConfigError names the file and the key."""
-    table = read_toml(path)
-    try:
-        return run_from_dict(table, base)
-    except ConfigError as err:
-        raise ConfigError(f"{path}: {err}") from err
