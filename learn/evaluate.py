@@ -264,8 +264,9 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
         segmentation_by_group,
         worst_segmentations,
     )
+    from learn.cluster_bootstrap import grouped_mean_iou_interval, sample_groups
     from learn.ensemble import MeanSoftmax
-    from learn.folder import is_dataset, materialize, open_split
+    from learn.folder import group_ids, is_dataset, materialize, open_split
     from learn.significance import mean_iou_interval, per_image_confusion
 
     first, run = members[0], members[0].run
@@ -286,7 +287,9 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     classify_data = run.task == "classify" and on_dataset
     model = build(lambda m: m)
     ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
-    seg_groups = worst = miou_interval = None
+    seg_groups = worst = miou_interval = groups = None
+    if on_dataset:  # each test sample's subject / object instance, for intervals over them
+        groups = sample_groups(*group_ids(split)[1:], n=len(test.y))
     found = dict.fromkeys(("by_active_taxels", "by_contactor", "hands_by_parts",
                            "hands_by_action", "errors"))
     if classify_data:  # accuracy by contact size and by contactor, most confident errors
@@ -308,7 +311,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
                                            cms)  # fmt: skip
         worst = {"images": worst[:N_WORST_KEPT],
                  "maps": pack_labels(pred[order[:N_WORST_MAPS]])}  # fmt: skip
-        miou_interval = list(mean_iou_interval(cms))
+        miou_interval = [*mean_iou_interval(cms), *grouped_mean_iou_interval(cms, groups)]
     fast = build(lambda m: fast_inference(m, check=test.x[:64]))
     res = evaluate_tensors(fast, test, n_cls)
     if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
@@ -329,7 +332,10 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "init": ckpt.get("init"),
            "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
            **found, "segmentation_by_group": seg_groups, "worst": worst,
-           "mean_iou_interval": miou_interval,
+           "mean_iou_interval": miou_interval and miou_interval[:2],
+           "mean_iou_interval_groups": miou_interval and miou_interval[2:],
+           "test_indices": None if groups is None else [int(i) for i in split.indices],
+           "test_groups": None if groups is None else groups.tolist(),
            "tta_views": views and views[0]}  # fmt: skip
     return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
 

@@ -6,8 +6,10 @@ scored on the same test samples with McNemar's exact test, which looks only at t
 exactly one of the two gets right (the pairing makes it far sharper than two intervals).
 A segmenter's mIoU gets a percentile bootstrap interval over its test images.
 
-Both treat test samples as independent; prints of one held-out person are alike, so the
-intervals are, if anything, too narrow.
+Both treat test samples as independent; prints of one held-out person are alike, so those
+intervals are too narrow. Rows that record their test samples' subjects (``test_groups``) also
+get intervals that redraw whole subjects and object instances (`learn.cluster_bootstrap`): an
+accuracy's, every pair's difference in accuracy, and a segmenter's mIoU.
 
     lo, hi = accuracy_interval(966, 1052)        # (0.900, 0.934)
     p = mcnemar_p(only_a_right=10, only_b_right=25)
@@ -78,6 +80,53 @@ def _wrong(r: dict) -> set[int]:
     return {int(e["index"]) for e in r["errors"]}
 
 
+def _correct(r: dict) -> np.ndarray | None:
+    """(S,) 1 / 0 per test sample (``test_indices`` order) of a classifier row that records its
+    test samples and their groups, else None."""
+    if r.get("test_groups") is None or r.get("errors") is None:
+        return None
+    return 1.0 - np.isin(np.asarray(r["test_indices"]), list(_wrong(r)))
+
+
+def _grouped(r: dict) -> str:
+    """The subject-level accuracy interval of a row, "lo–hi" in %, or "—" without groups."""
+    from learn.cluster_bootstrap import grouped_accuracy_interval
+
+    ok = _correct(r)
+    return "—" if ok is None else _span(grouped_accuracy_interval(ok, r["test_groups"]))
+
+
+def _grouped_pair(a: dict, b: dict) -> str:
+    """Subject-level interval of accuracy A minus B in points, or "—" unless both rows record
+    the same test samples and groups."""
+    from learn.cluster_bootstrap import grouped_difference_interval
+
+    ok_a, ok_b = _correct(a), _correct(b)
+    if ok_a is None or ok_b is None or a["test_indices"] != b["test_indices"]:
+        return "—"
+    lo, hi = grouped_difference_interval(ok_a, ok_b, a["test_groups"])
+    return f"{100 * lo:+.2f} to {100 * hi:+.2f}"
+
+
+def _span(interval) -> str:
+    lo, hi = interval
+    return f"{100 * lo:.2f}–{100 * hi:.2f}"
+
+
+def _groups_sentence(rows: list[dict]) -> list[str]:
+    """What the subject-level intervals redraw, from the first row that records groups."""
+    from learn.cluster_bootstrap import group_counts
+
+    first = next((r for r in rows if r.get("test_groups") is not None), None)
+    if first is None:
+        return []
+    counts = ", ".join(f"{n} {name}" for name, n in group_counts(first["test_groups"]).items())
+    return ["", f"*Subjects resampled*: a percentile bootstrap ({N_RESAMPLES:,} resamples, "
+            f"seeded) that redraws the test split's {counts} — each with all its samples — "
+            "instead of single samples. Prints of one person are alike, so this is the honest "
+            "width; the per-sample interval is too narrow."]  # fmt: skip
+
+
 def paired(a: dict, b: dict) -> dict[str, float]:
     """McNemar's comparison of two classifier report rows on the same test samples (rows of
     `learn.evaluate` carry every misclassified sample's dataset index in ``errors``):
@@ -103,13 +152,13 @@ def significance_markdown(rows: list[dict], labels: list[str]) -> list[str]:
         return []
     out = _interval_head("Classification: how sure the accuracies are",
                          f"Each accuracy with its exact {100 * LEVEL:g} % binomial "
-                         "(Clopper–Pearson) interval over the test samples:",
-                         "test samples", "accuracy %")  # fmt: skip
+                         "(Clopper–Pearson) interval over the test samples, and with test "
+                         "subjects resampled:", "test samples", "accuracy %", rows)  # fmt: skip
     for r, lab in zip(rows, labels, strict=True):
         cm = np.asarray(r["cm"])
         k, n = int(np.trace(cm)), int(cm.sum())
-        lo, hi = accuracy_interval(k, n)
-        out.append(f"| {lab} | {n:,} | {100 * k / n:.2f} | {100 * lo:.2f}–{100 * hi:.2f} |")
+        out.append(f"| {lab} | {n:,} | {100 * k / n:.2f} | {_span(accuracy_interval(k, n))} | "
+                   f"{_grouped(r)} |")
     listed = _paired_rows(rows, labels)
     pairs = list(combinations(listed, 2))
     if not pairs:
@@ -118,12 +167,13 @@ def significance_markdown(rows: list[dict], labels: list[str]) -> list[str]:
     out += ["", "Every two classifiers on the same test samples, McNemar's exact test on the "
             "samples exactly one of them gets right (p two-sided; a small p says the difference "
             "is not test-set luck):", "",
-            "| A | B | A − B (points) | only A right | only B right | p |",
-            "|---|---|---|---|---|---|"]  # fmt: skip
+            "| A | B | A − B (points) | only A right | only B right | p | "
+            f"A − B {100 * LEVEL:g} % interval, subjects resampled (points) |",
+            "|---|---|---|---|---|---|---|"]  # fmt: skip
     for (ra, la), (rb, lb) in pairs:
         c = paired(ra, rb)
         out.append(f"| {la} | {lb} | {100 * c['difference']:+.2f} | {c['only_a_right']} | "
-                   f"{c['only_b_right']} | {_p(c['p'])} |")
+                   f"{c['only_b_right']} | {_p(c['p'])} | {_grouped_pair(ra, rb)} |")
     if unpaired:
         out += ["", "Not paired (their rows list no per-sample errors): " + ", ".join(unpaired)
                 + "."]  # fmt: skip
@@ -137,19 +187,22 @@ def segmentation_markdown(rows: list[dict], labels: list[str]) -> list[str]:
         return []
     out = _interval_head("Segmentation: how sure the mIoUs are",
                          f"Each mIoU with its {100 * LEVEL:g} % percentile bootstrap interval "
-                         f"({N_RESAMPLES:,} resamples of the test images, seeded):",
-                         "test images", "mIoU %")  # fmt: skip
+                         f"({N_RESAMPLES:,} resamples of the test images, seeded), and with "
+                         "test subjects resampled:", "test images", "mIoU %",
+                         [r for r, _ in shown])  # fmt: skip
     for r, lab in shown:
-        lo, hi = r["mean_iou_interval"]
+        grouped = r.get("mean_iou_interval_groups")
         out.append(f"| {lab} | {r['n_test']:,} | {100 * r['metrics']['mean_iou']:.2f} | "
-                   f"{100 * lo:.2f}–{100 * hi:.2f} |")
+                   f"{_span(r['mean_iou_interval'])} | {_span(grouped) if grouped else '—'} |")
     return [*out, ""]
 
 
-def _interval_head(title: str, sentence: str, count: str, score: str) -> list[str]:
-    """A section's heading, its sentence and the head of its table of intervals."""
-    return [f"## {title}", "", sentence, "",
-            f"| method | {count} | {score} | {100 * LEVEL:g} % interval % |", "|---|---|---|---|"]
+def _interval_head(title: str, sentence: str, count: str, score: str,
+                   rows: list[dict]) -> list[str]:  # fmt: skip
+    """A section's heading, its sentences and the head of its table of intervals."""
+    return [f"## {title}", "", sentence, *_groups_sentence(rows), "",
+            f"| method | {count} | {score} | {100 * LEVEL:g} % interval % | "
+            f"{100 * LEVEL:g} % interval, subjects resampled % |", "|---|---|---|---|---|"]
 
 
 def _p(p: float) -> str:
