@@ -20,28 +20,51 @@ def _one_thread():
     torch.set_num_threads(1)
 
 
-def test_average_follows_the_recursion_over_every_step_weights_and_buffers():
-    torch.manual_seed(0)
-    model = nn.Sequential(nn.Linear(3, 4), nn.BatchNorm1d(4), nn.ReLU(), nn.Linear(4, 1))
-    opt = torch.optim.SGD(model.parameters(), lr=0.1, momentum=0.9)
-    decay = 0.8
-    ema = make_ema(model, opt, decay)
-    seen = []  # every step's parameters and float buffers, copied after the step
-    for _ in range(6):
-        loss = model(torch.randn(8, 3)).square().mean()
+def _train(model: nn.Module, opt, steps: int, scale: float = 1.0, seed: int = 0):
+    """Yield after each of ``steps`` SGD steps on random (8, 3) inputs times ``scale``."""
+    gen = torch.Generator().manual_seed(seed)
+    for _ in range(steps):
+        loss = model(scale * torch.randn(8, 3, generator=gen)).square().mean()
         opt.zero_grad()
         loss.backward()
         opt.step()
-        state = model.state_dict()
-        seen.append({k: v.clone() for k, v in state.items() if v.is_floating_point()})
-    want = dict(seen[0])  # the first step copies, then w_bar = d w_bar + (1 - d) w_t
-    for step in seen[1:]:
-        want = {k: decay * want[k] + (1 - decay) * step[k] for k in want}
+        yield
+
+
+def test_average_follows_the_warmed_up_recursion_over_every_step_weights_and_buffers():
+    """Against ``w_bar <- d w_bar + (1 - d) w_t``, ``d = min(decay, (1 + t) / (10 + t))`` for
+    update t = 0, 1, ... after the first step's copy (tf.train.ExponentialMovingAverage's
+    num_updates form), on every float parameter and buffer; integer buffers are the model's."""
+    torch.manual_seed(0)
+    model = nn.Sequential(nn.Linear(3, 4), nn.BatchNorm1d(4), nn.ReLU(), nn.Linear(4, 1))
+    opt = torch.optim.SGD(model.parameters(), lr=0.05, momentum=0.9)
+    decay = 0.6  # reached at t = 13: both regimes within 30 steps
+    ema = make_ema(model, opt, decay)
+    want: dict[str, torch.Tensor] = {}
+    for t, _ in enumerate(_train(model, opt, 30), start=-1):
+        now = {k: v.clone() for k, v in model.state_dict().items() if v.is_floating_point()}
+        d = min(decay, (1 + t) / (10 + t)) if t >= 0 else 0.0
+        want = {k: d * want[k] + (1 - d) * v for k, v in now.items()} if want else now
     got = ema.module.state_dict()
     for k, v in want.items():
         torch.testing.assert_close(got[k], v, rtol=1e-5, atol=1e-6, msg=k)
-    assert "1.running_mean" in want and int(ema.n_averaged) == 6
+    assert "1.running_var" in want and int(ema.n_averaged) == 30
+    assert torch.equal(got["1.num_batches_tracked"], model.state_dict()["1.num_batches_tracked"])
     assert not torch.equal(got["0.weight"], model.state_dict()["0.weight"])
+
+
+def test_the_average_forgets_the_initial_batch_norm_statistics():
+    """Inputs 1,000 times smaller than BatchNorm's initial running variance (1) assumes: after 300
+    steps at decay 0.998 the averaged variances are the trained ones' size. Without the warm-up
+    the initial 1 would still weigh 0.998 ** 300 = 0.55, ~10,000 times the true variance."""
+    torch.manual_seed(1)
+    model = nn.Sequential(nn.Linear(3, 4), nn.BatchNorm1d(4), nn.ReLU(), nn.Linear(4, 1))
+    opt = torch.optim.SGD(model.parameters(), lr=0.01)
+    ema = make_ema(model, opt, 0.998)
+    for _ in _train(model, opt, 300, scale=1e-3, seed=1):
+        pass
+    ratio = ema.module[1].running_var / model[1].running_var
+    assert torch.all((ratio > 0.5) & (ratio < 2.0)), ratio
 
 
 def test_decay_zero_is_off_and_a_decay_out_of_range_is_refused():
