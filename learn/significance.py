@@ -166,7 +166,9 @@ def significance_markdown(rows: list[dict], labels: list[str]) -> list[str]:
     unpaired = [lab for lab in labels if lab not in {la for _, la in listed}]
     out += ["", "Every two classifiers on the same test samples, McNemar's exact test on the "
             "samples exactly one of them gets right (p two-sided; a small p says the difference "
-            "is not test-set luck):", "",
+            "is not test-set luck among independent samples). The last column redraws whole "
+            "test subjects instead: when its interval holds 0, the difference could come from "
+            "which persons and objects were held out:", "",
             "| A | B | A − B (points) | only A right | only B right | p | "
             f"A − B {100 * LEVEL:g} % interval, subjects resampled (points) |",
             "|---|---|---|---|---|---|---|"]  # fmt: skip
