@@ -1,5 +1,6 @@
 """Labels of `handskin evaluate` report rows: a method's name, and what tells two rows of one
-method apart (input size, width, epochs, training precision, seed, training data, run folder).
+method apart (input size, width, epochs, training precision, views, weight averaging, seed,
+training data, run folder).
 Used by the report's tables (`learn.eval_report`) and by the charts drawn from report JSON."""
 
 from __future__ import annotations
@@ -41,14 +42,16 @@ TTA_SUFFIX = " + test-time flips"
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
     test-time flips); where two rows would share a label, the input size, then the width
-    multiplier, the training epochs, the training precision, the training views, the seed (each
-    when theirs differ), then the training data, then the run folder, added."""
+    multiplier, the training epochs, the training precision, the training views, the weight
+    averaging, the seed (each when theirs differ), then the training data, then the run folder,
+    added."""
     labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
     for extra, only_if_differs in ((size_label, True),
                                    (lambda r: width_label(r) or "default width", True),
                                    (epochs_label, True),
                                    (precision_label, True),
                                    (views_label, True),
+                                   (averaging_label, True),
                                    (lambda r: f"seed {r.get('seed')}", True),
                                    (data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False)):
@@ -108,6 +111,13 @@ def views_label(r: dict) -> str:
     cfg = r.get("config") or {}
     flips = "flips" if cfg.get("flips", True) else "no flips"
     return flips + (" + 180°" if cfg.get("rot180") else "")
+
+
+def averaging_label(r: dict) -> str:
+    """``EMA <decay>`` or ``no EMA``: a report row's weight averaging
+    (`learn.config.TrainConfig.ema_decay`; checkpoints from before it existed: none)."""
+    decay = ((r.get("config") or {}).get("train") or {}).get("ema_decay") or 0.0
+    return f"EMA {decay:g}" if decay else "no EMA"
 
 
 def width_label(r: dict) -> str | None:

@@ -261,6 +261,12 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     turn = dict(s1, config={**long["config"], "rot180": True}, checkpoint="/r/t/best.pt")
     assert row_labels([s0, s1, turn]) == [
         "SegNet, flips, seed 0", "SegNet, flips, seed 1", "SegNet, flips + 180°"]
+    # ... or with weight averaging (no ema_decay recorded: none), seed by seed
+    ema = [dict(s, config={**s["config"], "train": {"epochs": 30, "ema_decay": 0.998}},
+                checkpoint=f"/r/e{s['seed']}/best.pt") for s in (s0, s1)]  # fmt: skip
+    assert row_labels([s0, s1, *ema]) == [
+        "SegNet, no EMA, seed 0", "SegNet, no EMA, seed 1", "SegNet, EMA 0.998, seed 0",
+        "SegNet, EMA 0.998, seed 1"]  # fmt: skip
     assert "bfloat16" in _init_text(dict(bf16, init="random"))
     assert "bfloat16" not in _init_text(dict(long, init="random"))
     # ensembles: a repeated method is counted, and seed replicates name their seeds
