@@ -226,7 +226,7 @@ def evaluate_command(
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
     from learn.checkpoint import load_checkpoint, versions
     from learn.classical import load_npz
-    from learn.eval_report import save_error_sheets, write_report
+    from learn.eval_report import report_json, save_error_sheets, write_report
     from learn.evaluate import evaluate_checkpoint, evaluate_ensemble, tta_views
     from learn.train import run_from_dict
 
@@ -259,7 +259,7 @@ def evaluate_command(
     for path in save_error_sheets(rows, data, report):
         typer.echo(f"picture written to {path}")
     write_report(rows, report, header)
-    report.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+    report.with_suffix(".json").write_text(report_json(rows))
     typer.echo(f"report written to {report}")
 
 

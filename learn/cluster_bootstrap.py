@@ -11,6 +11,7 @@ of hands and non-hands.
     groups = sample_groups(subject_id, instance_id)          # (S,) int64 group code per sample
     lo, hi = grouped_accuracy_interval(correct, groups)    # fractions
     lo, hi = grouped_mean_iou_interval(cms, groups)        # (S, C, C) per-image matrices
+    lo, hi = grouped_mean_iou_difference_interval(cms_a, cms_b, groups)   # paired, A - B
 
 Seeded (`BOOTSTRAP_SEED`): the same inputs give the same interval, bytes and all.
 """
@@ -99,3 +100,20 @@ def grouped_mean_iou_interval(cms: np.ndarray, groups: np.ndarray,
     s, c = cms.shape[0], cms.shape[1]
     pooled = (sample_weights(groups, resamples) @ cms.reshape(s, -1)).reshape(-1, c, c)
     return _ends(batched_mean_iou(pooled), level)
+
+
+def grouped_mean_iou_difference_interval(cms_a: np.ndarray, cms_b: np.ndarray,
+                                         groups: np.ndarray, level: float = LEVEL,
+                                         resamples: int = N_RESAMPLES,
+                                         ) -> tuple[float, float]:  # fmt: skip
+    """Percentile interval (lo, hi) of mIoU A minus mIoU B (fractions) of two segmenters' (S, C,
+    C) per-image confusion matrices on the same test images, redrawn together by group (pass
+    ``sample_groups(None, None, n=S)`` to redraw single images): a paired comparison."""
+    if cms_a.shape != cms_b.shape:
+        raise ValueError(f"grouped_mean_iou_difference_interval: {cms_a.shape} against "
+                         f"{cms_b.shape}; give both the same test images and classes")
+    s, c = cms_a.shape[0], cms_a.shape[1]
+    w = sample_weights(groups, resamples)
+    a = batched_mean_iou((w @ cms_a.reshape(s, -1)).reshape(-1, c, c))
+    b = batched_mean_iou((w @ cms_b.reshape(s, -1)).reshape(-1, c, c))
+    return _ends(a - b, level)

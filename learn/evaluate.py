@@ -334,6 +334,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            **found, "segmentation_by_group": seg_groups, "worst": worst,
            "mean_iou_interval": miou_interval and miou_interval[:2],
            "mean_iou_interval_groups": miou_interval and miou_interval[2:],
+           "per_image_cm": None if miou_interval is None else cms.astype(np.int64).tolist(),
            "test_indices": None if groups is None else [int(i) for i in split.indices],
            "test_groups": None if groups is None else groups.tolist(),
            "tta_views": views and views[0]}  # fmt: skip

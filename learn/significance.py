@@ -9,7 +9,9 @@ A segmenter's mIoU gets a percentile bootstrap interval over its test images.
 Both treat test samples as independent; prints of one held-out person are alike, so those
 intervals are too narrow. Rows that record their test samples' subjects (``test_groups``) also
 get intervals that redraw whole subjects and object instances (`learn.cluster_bootstrap`): an
-accuracy's, every pair's difference in accuracy, and a segmenter's mIoU.
+accuracy's, every pair's difference in accuracy, and a segmenter's mIoU; segmenters that record
+per-image confusion matrices (``per_image_cm``) are compared pairwise, mIoU A − B with paired
+bootstrap intervals (images, then subjects, redrawn).
 
     lo, hi = accuracy_interval(966, 1052)        # (0.900, 0.934)
     p = mcnemar_p(only_a_right=10, only_b_right=25)
@@ -104,8 +106,7 @@ def _grouped_pair(a: dict, b: dict) -> str:
     ok_a, ok_b = _correct(a), _correct(b)
     if ok_a is None or ok_b is None or a["test_indices"] != b["test_indices"]:
         return "—"
-    lo, hi = grouped_difference_interval(ok_a, ok_b, a["test_groups"])
-    return f"{100 * lo:+.2f} to {100 * hi:+.2f}"
+    return _signed(grouped_difference_interval(ok_a, ok_b, a["test_groups"]))
 
 
 def _span(interval) -> str:
@@ -196,7 +197,39 @@ def segmentation_markdown(rows: list[dict], labels: list[str]) -> list[str]:
         grouped = r.get("mean_iou_interval_groups")
         out.append(f"| {lab} | {r['n_test']:,} | {100 * r['metrics']['mean_iou']:.2f} | "
                    f"{_span(r['mean_iou_interval'])} | {_span(grouped) if grouped else '—'} |")
-    return [*out, ""]
+    return [*out, *_segmenter_pairs(shown), ""]
+
+
+def _segmenter_pairs(shown: list[tuple[dict, str]]) -> list[str]:
+    """Every two segmenters that record per-image confusion matrices of the same test images:
+    the mIoU difference with paired intervals, images and subjects redrawn."""
+    from learn.cluster_bootstrap import grouped_mean_iou_difference_interval as diff_interval
+    from learn.cluster_bootstrap import sample_groups
+
+    listed = [(r, lab) for r, lab in shown if r.get("per_image_cm") is not None]
+    pairs = [(a, b) for a, b in combinations(listed, 2)
+             if a[0].get("test_indices") == b[0].get("test_indices")]  # fmt: skip
+    if not pairs:
+        return []
+    out = ["", "Every two segmenters on the same test images: mIoU A − B with paired "
+           f"{100 * LEVEL:g} % intervals (both redrawn together: single images, then whole "
+           "test subjects); an interval that holds 0 leaves the order open:", "",
+           "| A | B | A − B (points) | interval, images resampled | interval, subjects resampled |",
+           "|---|---|---|---|---|"]  # fmt: skip
+    for (ra, la), (rb, lb) in pairs:
+        cms_a, cms_b = np.asarray(ra["per_image_cm"], float), np.asarray(rb["per_image_cm"], float)
+        images = diff_interval(cms_a, cms_b, sample_groups(None, None, n=len(cms_a)))
+        groups = ra.get("test_groups")
+        subjects = "—" if groups is None else _signed(diff_interval(cms_a, cms_b,
+                                                                   np.asarray(groups)))
+        d = ra["metrics"]["mean_iou"] - rb["metrics"]["mean_iou"]
+        out.append(f"| {la} | {lb} | {100 * d:+.2f} | {_signed(images)} | {subjects} |")
+    return out
+
+
+def _signed(interval) -> str:
+    lo, hi = interval
+    return f"{100 * lo:+.2f} to {100 * hi:+.2f}"
 
 
 def _interval_head(title: str, sentence: str, count: str, score: str,

@@ -15,6 +15,7 @@ from learn.cluster_bootstrap import (
     group_counts,
     grouped_accuracy_interval,
     grouped_difference_interval,
+    grouped_mean_iou_difference_interval,
     grouped_mean_iou_interval,
     sample_groups,
     sample_weights,
@@ -140,8 +141,62 @@ def test_evaluated_rows_record_their_test_subjects(checkpoints, tiny_dataset, tm
         want = sample_groups(reader["subject_id"][np.sort(idx)][np.argsort(np.argsort(idx))],
                            reader["instance_id"][np.sort(idx)][np.argsort(np.argsort(idx))])
         assert np.array_equal(row["test_groups"], want) and len(idx) == row["n_test"]
-        if arch == "segnet":
+        if arch == "segnet":  # per-image matrices add up to the evaluator's pooled one
+            assert np.array_equal(np.sum(row["per_image_cm"], axis=0), row["cm"])
             lo, hi = row["mean_iou_interval_groups"]
             assert lo <= row["metrics"]["mean_iou"] <= hi
             text = write_report([row], tmp_path / "r.md").read_text()
             assert f"| {100 * lo:.2f}–{100 * hi:.2f} |" in text
+
+
+def _two_segmenters(seed: int = 6):
+    """Per-image confusion matrices of two segmenters on the same 15 subjects x 10 images: B
+    is A with some of its right pixels of class 2 turned wrong, more for some subjects."""
+    rng = np.random.default_rng(seed)
+    subject = np.repeat(np.arange(15), 10)
+    hit = np.clip(rng.uniform(0.5, 0.95, 15)[subject] + rng.normal(0, 0.03, 150), 0, 1)
+    a = np.zeros((150, 3, 3))
+    a[:, 0, 0] = 400
+    a[:, 1, 1], a[:, 1, 2] = 100 * hit, 100 * (1 - hit)
+    a[:, 2, 2], a[:, 2, 0] = 60 * hit, 60 * (1 - hit)
+    lost = a[:, 2, 2] * rng.uniform(0.0, 0.2, 15)[subject]
+    b = a.copy()
+    b[:, 2, 2] -= lost
+    b[:, 2, 1] += lost
+    return subject, a, b
+
+
+def test_mean_iou_difference_against_a_slow_paired_bootstrap():
+    subject, a, b = _two_segmenters()
+    groups = sample_groups(subject, None)
+    lo, hi = grouped_mean_iou_difference_interval(a, b, groups, resamples=2000)
+
+    def diff(k):
+        return M.mean_iou(torch.tensor(a[k].sum(0))) - M.mean_iou(torch.tensor(b[k].sum(0)))
+
+    assert (lo, hi) == pytest.approx(_slow_ends(diff, groups, 2000, 14), abs=0.004)
+    assert 0 < lo < diff(np.arange(150)) < hi  # B is worse on every subject
+    single = sample_groups(None, None, n=150)
+    ilo, ihi = grouped_mean_iou_difference_interval(a, b, single, resamples=2000)
+    assert ihi - ilo < hi - lo  # images alike within a subject: redrawing images is narrower
+    assert grouped_mean_iou_difference_interval(a, a, groups) == (0.0, 0.0)
+    with pytest.raises(ValueError, match="same test images"):
+        grouped_mean_iou_difference_interval(a, b[:10], groups)
+
+
+def test_segmenter_pairs_in_the_report_section():
+    from learn.significance import segmentation_markdown
+
+    subject, a, b = _two_segmenters()
+    groups = sample_groups(subject, None)
+    rows = [{"n_test": 150, "metrics": {"mean_iou": M.mean_iou(torch.tensor(cm.sum(0)))},
+             "mean_iou_interval": [0.5, 0.6], "mean_iou_interval_groups": [0.4, 0.7],
+             "per_image_cm": cm.tolist(), "test_indices": list(range(150)),
+             "test_groups": groups.tolist()} for cm in (a, b)]  # fmt: skip
+    text = "\n".join(segmentation_markdown(rows, ["A", "B"]))
+    lo, hi = grouped_mean_iou_difference_interval(a, b, groups)
+    d = rows[0]["metrics"]["mean_iou"] - rows[1]["metrics"]["mean_iou"]
+    assert f"| A | B | {100 * d:+.2f} |" in text
+    assert f"| {100 * lo:+.2f} to {100 * hi:+.2f} |" in text
+    other = dict(rows[1], test_indices=list(range(1, 151)))  # another test set: no pair
+    assert "| A | B |" not in "\n".join(segmentation_markdown([rows[0], other], ["A", "B"]))

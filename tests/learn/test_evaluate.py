@@ -376,3 +376,17 @@ def test_segmenter_worst_images_and_their_sheet(checkpoints, tiny_dataset, tmp_p
     assert sheet.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert f"![lowest-mIoU test images]({sheet.name})" in md.read_text()
     assert json.loads(md.with_suffix(".json").read_text())[0]["error_sheet"] == sheet.name
+
+
+def test_report_json_keeps_every_value_and_puts_number_lists_on_one_line():
+    from learn.eval_report import report_json
+
+    rows = [{"cm": [[1, -2], [3e-05, 4.5]], "names": ["a", "1"], "x": float("nan"),
+             "per_image_cm": [[[0, 1], [2, 3]]] * 3, "nested": {"v": [1.0, -1e20]}}]  # fmt: skip
+    text = report_json(rows)
+    back = json.loads(text)
+    assert back[0]["x"] != back[0]["x"]  # NaN survives
+    back[0]["x"] = rows[0]["x"] = None
+    assert back == rows
+    assert "[1, -2]" in text and "[3e-05, 4.5]" in text and '"1"' in text
+    assert "[1.0, -1e+20]" in text
