@@ -68,7 +68,10 @@ class TrainConfig:
     lr_factors: Mapping[str, float] = field(default_factory=dict, hash=False)
     seed: int = 0  # torch / numpy seed of the run
     # per-step decay of an exponential moving average of the weights (learn.averaging), which is
-    # then what is validated, selected and saved; 0 = off (the raw weights, the paper's way)
+    # then what is validated, selected and saved; 0 = off (the raw weights, the paper's way).
+    # Measured at 0.998 on the paper-sized forearm set: HandsNet's validation accuracy smooth,
+    # its test accuracy unchanged (mean of seeds 0-2 92.30 %, 92.33 % without); SegNet +0.45
+    # mIoU points (one seed, within the interval), so it is off by default.
     ema_decay: float = 0.0
 
     def __post_init__(self) -> None:

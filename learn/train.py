@@ -228,7 +228,7 @@ def fit(
     ema = make_ema(model, optimizer, run.train.ema_decay)
     scored = model if ema is None else ema.module  # the weights validated, selected and kept
     loss_fn = make_loss(run, data.train)
-    start, best, history, best_state = 0, float("nan"), [], _state(model)
+    start, best, history, best_state = 0, float("nan"), [], _state(scored)
     if resume and out is not None and (out / LAST).is_file():
         start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler,
                                                            ema)  # fmt: skip
