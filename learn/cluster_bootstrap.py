@@ -92,13 +92,13 @@ def grouped_difference_interval(correct_a: np.ndarray, correct_b: np.ndarray, gr
     return _ends(w @ diff / w.sum(1), level)
 
 
-def grouped_mean_iou_interval(cms: np.ndarray, groups: np.ndarray,
-                              level: float = LEVEL,
-                              resamples: int = N_RESAMPLES) -> tuple[float, float]:  # fmt: skip
+def grouped_mean_iou_interval(cms: np.ndarray, groups: np.ndarray, level: float = LEVEL,
+                              resamples: int = N_RESAMPLES,
+                              seed: int = BOOTSTRAP_SEED) -> tuple[float, float]:  # fmt: skip
     """Percentile interval (lo, hi) of the pooled mIoU of (S, C, C) per-image confusion
     matrices (`learn.significance.per_image_confusion`), test subjects redrawn."""
     s, c = cms.shape[0], cms.shape[1]
-    pooled = (sample_weights(groups, resamples) @ cms.reshape(s, -1)).reshape(-1, c, c)
+    pooled = (sample_weights(groups, resamples, seed) @ cms.reshape(s, -1)).reshape(-1, c, c)
     return _ends(batched_mean_iou(pooled), level)
 
 

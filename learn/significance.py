@@ -70,12 +70,12 @@ def batched_mean_iou(cm: np.ndarray) -> np.ndarray:
 def mean_iou_interval(cms: np.ndarray, level: float = LEVEL, resamples: int = N_RESAMPLES,
                       seed: int = BOOTSTRAP_SEED) -> tuple[float, float]:  # fmt: skip
     """Percentile bootstrap interval (lo, hi) of the pooled mIoU of (S, C, C) per-image
-    confusion matrices: the test images drawn with replacement ``resamples`` times."""
-    s = len(cms)
-    counts = np.random.default_rng(seed).multinomial(s, np.full(s, 1.0 / s), size=resamples)
-    pooled = (counts @ cms.reshape(s, -1)).reshape(resamples, *cms.shape[1:])
-    lo, hi = np.quantile(batched_mean_iou(pooled), [(1 - level) / 2, (1 + level) / 2])
-    return float(lo), float(hi)
+    confusion matrices: the test images drawn with replacement ``resamples`` times (each image
+    its own group of `learn.cluster_bootstrap.grouped_mean_iou_interval`)."""
+    from learn.cluster_bootstrap import grouped_mean_iou_interval, sample_groups
+
+    return grouped_mean_iou_interval(cms, sample_groups(None, None, n=len(cms)), level,
+                                     resamples, seed)  # fmt: skip
 
 
 def _wrong(r: dict) -> set[int]:
