@@ -58,6 +58,8 @@ class PressPlan:
     site_uv : (u, v) in the part's flat lattice (``Part.flat_mm``), mm; None = runner draws one.
     shear_n : (along the link axis, around it) tangential force limits while holding.
     joint_targets : contactor joint name (unprefixed) -> target (rad) reached under torque limits.
+    preshape : names in ``joint_targets`` held at their targets from the start (the shape a hand
+        takes in the air, such as its finger spread); the others close after the palm lands.
     """
 
     site_uv: tuple[float, float] | None = None
@@ -67,6 +69,7 @@ class PressPlan:
     shear_n: tuple[float, float] = (0.0, 0.0)
     twist_nm: float = 0.0
     joint_targets: dict[str, float] = field(default_factory=dict)
+    preshape: tuple[str, ...] = ()
     durations_s: tuple[float, float, float, float] = (0.2, 0.3, 0.3, 0.2)
     action: int = -1
     operator_position: int = -1
@@ -74,6 +77,10 @@ class PressPlan:
     def __post_init__(self) -> None:
         if not self.force_n > 0:
             raise ConfigError(f"PressPlan.force_n={self.force_n!r} must be > 0 N")
+        stray = sorted(set(self.preshape) - set(self.joint_targets))
+        if stray:
+            raise ConfigError(f"PressPlan.preshape names {stray} that have no joint_targets; "
+                              "give every preshape joint a target")
         if len(self.durations_s) != 4 or min(self.durations_s) < 0:
             raise ConfigError(f"PressPlan.durations_s={self.durations_s}: 4 values >= 0 needed")
         if not -1 <= self.action < len(ACTIONS):

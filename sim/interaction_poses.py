@@ -2,7 +2,8 @@
 
 Targets are degrees of flexion (positive = flexion, palmar abduction, cupping; `sim.hand`). The
 finger servos are weak (`sim.hand_kinematics.JOINT_TORQUE_NM`) and close only after the palm has
-landed (`sim.press.finger_fraction`), so targets beyond the link make fingers stop on it.
+landed (`sim.press.finger_fraction`), so targets beyond the link make fingers stop on it; the
+finger spread alone is set in the air (`finger_spread`).
 
 Modes (Albini & Cannata 2020, Fig. 6: whole hands, fingertips only, different pressures):
 - ``wrap``: palm on a face with the MCP row on an edge, fingers around it (grasps; pushes whose
@@ -10,6 +11,10 @@ Modes (Albini & Cannata 2020, Fig. 6: whole hands, fingertips only, different pr
 - ``flat``: palm and straight fingers on a face long enough for them;
 - ``fingertips``: a random subset of fingers, the wrist pitched so that only they touch;
 - ``palm``: fingers lifted; ``curled``: loose fist, knuckles and palm.
+
+Every mode fans the fingers by the subject's habitual spread (`finger_spread`; held from before
+the hand lands, `sim.contactors.PressPlan.preshape`). Before the spread, the abduction joints
+had no target and no noise: every hand pressed with its four fingers parallel and touching.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import numpy as np
 from sim import placement
 from sim.hand_kinematics import FINGERS, JOINT_LIMITS_DEG, hand_geometry
 from sim.parts import Part
-from sim.subjects import Subject
+from sim.subjects import FINGER_SPREAD_LIMIT_DEG, Subject
 
 _GRASP = {"mcp_flex": 70.0, "pip": 45.0, "dip": 20.0}  # beyond the edge: stop on the link
 _GRASP_THUMB = {"thumb_cmc_abd": 15.0, "thumb_cmc_flex": -10.0, "thumb_mcp": 10.0, "thumb_ip": 10.0}
@@ -38,6 +43,8 @@ FREE_PROBS = (0.3, 0.35, 0.05, 0.1, 0.2)  # fingertip touches are common in Fig.
 # Palm cupping of a grasp: the 4th/5th CMC joints flex 10-15 / 20-30 deg (`sim.hand`); a power
 # grasp uses most of it (was 10: median active taxels 38 -> 39, palm share 0.53, measured).
 GRASP_ARCH_DEG = 20.0
+# Finger fan: MCP abduction of each finger away from the middle one, in units of the spread.
+FAN = {"index": 1.0, "middle": 0.0, "ring": 1.0, "pinkie": 2.0}
 
 
 @dataclass(frozen=True)
@@ -49,6 +56,7 @@ class HandPose:
     shift_m: float = 0.0
     pitch_rad: float = 0.0
     mode: str = "flat"
+    preshape: tuple[str, ...] = ()  # suffixes held from the start (`PressPlan.preshape`)
 
 
 def _limit_key(suffix: str) -> str:
@@ -65,6 +73,26 @@ def _noisy(pose_deg: dict[str, float], sd_deg: float, rng: np.random.Generator) 
     for suffix in sorted(pose_deg):
         lo, hi = JOINT_LIMITS_DEG[_limit_key(suffix)]
         out[suffix] = float(np.deg2rad(np.clip(pose_deg[suffix] + rng.normal(0, sd_deg), lo, hi)))
+    return out
+
+
+def finger_spread(
+    subject: Subject, targets_rad: dict[str, float], rng: np.random.Generator
+) -> dict[str, float]:
+    """MCP abduction targets (suffix -> rad) fanning the fingers apart by this trial's spread.
+
+    The spread is the subject's habit plus N(0, half their pose noise), clipped to
+    `FINGER_SPREAD_LIMIT_DEG`; each finger turns `FAN` times it away from the middle finger, times
+    cos(its MCP flexion target): the collateral ligaments tighten as the MCP flexes, so a finger
+    bent 90 degrees cannot spread (Kapandji, The Physiology of the Joints, vol. 1).
+    """
+    lo, hi = FINGER_SPREAD_LIMIT_DEG
+    habit, noise = subject.finger_spread_deg, 0.5 * subject.pose_noise_deg
+    spread = float(np.clip(habit + rng.normal(0.0, noise), lo, hi))
+    out = {}
+    for f in FINGERS:
+        bend = max(float(np.cos(targets_rad.get(f"{f}_mcp_flex", 0.0))), 0.0)
+        out[f"{f}_mcp_abd"] = float(np.deg2rad(FAN[f] * spread * bend))
     return out
 
 
@@ -128,7 +156,9 @@ def finger_pose(
         pose, shift, pitch = _fingertips(subject, rng)
     else:
         pose, shift = _mode_pose(mode, wrap_shift_m)
-    return HandPose(_noisy(pose, subject.pose_noise_deg, rng), shift, pitch, mode)
+    targets = _noisy(pose, subject.pose_noise_deg, rng)
+    spread = finger_spread(subject, targets, rng)
+    return HandPose(targets | spread, shift, pitch, mode, tuple(spread))
 
 
 def hand_direction(part: Part, taxel: int, yaw_rad: float) -> np.ndarray:

@@ -212,6 +212,7 @@ def plan_hand_interaction(
         site_uv=(float(site[0]), float(site[1])), yaw_rad=yaw, tilt_rad=tuple(tilt.tolist()),
         force_n=float(force), shear_n=(float(shear[0]), float(shear[1])), twist_nm=float(twist),
         joint_targets={joint_name(subject, j): v for j, v in pose.targets_rad.items()},
+        preshape=tuple(joint_name(subject, j) for j in pose.preshape),
         durations_s=durations, action=ACTIONS.index(action),
         operator_position=OPERATOR_POSITIONS.index(operator_position),
     )

@@ -69,6 +69,7 @@ class PressScene:
     tilt_limit_nm: float = TILT_LIMIT_NM
     plan_act: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # set by reset
     plan_target: np.ndarray = field(default_factory=lambda: np.zeros(0))  # rad, set by reset
+    plan_preshape: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # set by reset
 
 
 def _add_root(spec: mujoco.MjSpec, tilt_kp: float = TILT_KP) -> None:
@@ -183,8 +184,8 @@ def schedule(scene: PressScene, plan: PressPlan, times_s: np.ndarray) -> Schedul
     """The controls of ``plan`` at times (T,) s (after `reset` with the same plan)."""
     target, limit = root_schedule(plan, times_s)
     limit[:, 4:] = scene.tilt_limit_nm
-    frac = finger_fraction(plan, times_s)
-    return Schedule(target, limit, frac[:, None] * scene.plan_target[None, :])
+    frac = np.where(scene.plan_preshape[None, :], 1.0, finger_fraction(plan, times_s)[:, None])
+    return Schedule(target, limit, frac * scene.plan_target[None, :])
 
 
 def apply_tick(scene: PressScene, sched: Schedule, i: int) -> None:
@@ -209,6 +210,10 @@ def reset(scene: PressScene, plan: PressPlan, pos_m: np.ndarray, quat: np.ndarra
     names = list(plan.joint_targets)
     scene.plan_act = np.array([scene.joint_act[n] for n in names], dtype=np.int64)
     scene.plan_target = np.array([plan.joint_targets[n] for n in names], dtype=float)
+    scene.plan_preshape = np.array([n in plan.preshape for n in names], dtype=bool)
     target, _ = root_controls(plan, 0.0)
     d.qpos[scene.root_qpos] = target
+    # preshaped joints start at their targets: the hand arrives already shaped
+    held = scene.plan_act[scene.plan_preshape]
+    d.qpos[m.jnt_qposadr[m.actuator_trnid[held, 0]]] = scene.plan_target[scene.plan_preshape]
     apply_controls(scene, plan, 0.0)

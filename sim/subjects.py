@@ -22,9 +22,15 @@ TISSUE_DEPTH_MEAN_M, TISSUE_DEPTH_SD_M = 0.0035, 0.0004  # soft-tissue allowance
 FORCE_LOG_SD = 0.3  # force scale is log-normal around 1 (people press 0.5-2x as hard)
 APPROACH_SD_DEG = 15.0  # preferred offset of the approach direction around the link axis
 POSE_NOISE_RANGE_DEG = (2.0, 8.0)  # per-subject std of joint-angle noise on grasp poses
+# Habitual finger spread: the angle (degrees) between neighbouring fingers of an open hand, at
+# the MCP joints. A hand at rest holds its fingers slightly apart, some people's more than others'
+# (assumed uniform 0-8 degrees; not measured): index and ring lean that far from the middle
+# finger, the pinkie twice as far (`sim.interaction_poses.finger_spread`).
+FINGER_SPREAD_RANGE_DEG = (0.0, 8.0)
 FORCE_SCALE_RANGE = (0.2, 5.0)
 APPROACH_RANGE_DEG = (-60.0, 60.0)
 POSE_NOISE_LIMIT_DEG = (0.0, 30.0)
+FINGER_SPREAD_LIMIT_DEG = (0.0, 10.0)  # the pinkie, 2 x spread from the hand's axis, <= 20 deg
 
 
 @dataclass(frozen=True)
@@ -36,6 +42,8 @@ class Subject:
     force_scale: float = 1.0  # multiplier on an interaction's nominal force (dimensionless)
     approach_deg: float = 0.0  # preferred approach azimuth around the link axis, degrees
     pose_noise_deg: float = 4.0  # std of per-joint noise added to grasp poses, degrees
+    # habitual angle between neighbouring fingers (MCP abduction), degrees; 0 = fingers together
+    finger_spread_deg: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.subject_id:
@@ -43,6 +51,7 @@ class Subject:
         _check("force_scale", self.force_scale, FORCE_SCALE_RANGE)
         _check("approach_deg", self.approach_deg, APPROACH_RANGE_DEG)
         _check("pose_noise_deg", self.pose_noise_deg, POSE_NOISE_LIMIT_DEG)
+        _check("finger_spread_deg", self.finger_spread_deg, FINGER_SPREAD_LIMIT_DEG)
 
     @property
     def handedness(self) -> str:
@@ -76,7 +85,8 @@ def sample_subjects(n: int, rng: np.random.Generator, *, first_id: int = 0) -> l
     """``n`` subjects drawn from the paper's population; ids ``s{first_id:04d}`` onwards.
 
     Hand length: normal (mean 18 cm, sd 1.5 cm) truncated to 15-22 cm; breadth = length x
-    N(0.45, 0.015) (so breadth correlates with length); right-handed with probability 0.778.
+    N(0.45, 0.015) (so breadth correlates with length); right-handed with probability 0.778;
+    habitual finger spread uniform over `FINGER_SPREAD_RANGE_DEG`.
     The same Generator state gives the same subjects.
     """
     if n < 0:
@@ -88,6 +98,7 @@ def sample_subjects(n: int, rng: np.random.Generator, *, first_id: int = 0) -> l
     force = np.clip(np.exp(rng.normal(0.0, FORCE_LOG_SD, n)), 0.4, 2.5)
     approach = np.clip(rng.normal(0.0, APPROACH_SD_DEG, n), -45.0, 45.0)
     noise = rng.uniform(*POSE_NOISE_RANGE_DEG, n)
+    spread = rng.uniform(*FINGER_SPREAD_RANGE_DEG, n)  # drawn last: earlier draws unchanged
     return [
         Subject(
             subject_id=f"s{first_id + i:04d}",
@@ -96,7 +107,7 @@ def sample_subjects(n: int, rng: np.random.Generator, *, first_id: int = 0) -> l
                 side="right" if right[i] else "left", tissue_depth_m=float(tissue[i]),
             ),
             force_scale=float(force[i]), approach_deg=float(approach[i]),
-            pose_noise_deg=float(noise[i]),
+            pose_noise_deg=float(noise[i]), finger_spread_deg=float(spread[i]),
         )
         for i in range(n)
     ]
