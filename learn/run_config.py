@@ -40,6 +40,9 @@ class RunConfig:
     # hand looks like a left one with the same part labels; the turn keeps its chirality.
     # SegNet with it, same steps: 52.8 % mIoU (53.5 % without), so it is off by default.
     rot180: bool = False
+    # random translation of every training image (and its label image) by up to this many
+    # pixels of the network input along each axis, zero-filled (`learn.augment`); 0 = off
+    shift_px: int = 0
     threads: int = 2  # torch CPU threads (the project's machines have 2 shared cores)
     # number format of the training forward pass: "fp32", or "bf16" to autocast convolutions and
     # matrix products to bfloat16 (torch.autocast) while weights, optimizer state, loss and
@@ -53,6 +56,12 @@ class RunConfig:
                               f"{', '.join(sorted(TASK_OF_ARCH))}")  # fmt: skip
         if not 0.0 <= self.val_fraction < 1.0:
             raise ConfigError(f"RunConfig.val_fraction must be in [0, 1), not {self.val_fraction}")
+        half = min(self.model.input_size) // 2
+        if not 0 <= self.shift_px <= half:
+            raise ConfigError(
+                f"RunConfig.shift_px={self.shift_px} is outside 0..{half} (half the smaller side "
+                "of the network input, pixels). Fix: 0 (off) or a few pixels"
+            )
         if self.patience_epochs < 0 or self.threads < 1 or self.eval_batch_size < 1:
             raise ConfigError("RunConfig: patience_epochs >= 0, threads >= 1, eval_batch_size >= 1")
         if self.precision not in PRECISIONS:

@@ -8,7 +8,8 @@ Images of the training split are read once (``learn.data`` / ``learn.folder``, r
 ``run.model.input_size``) and kept as ``(S, 1, h, w)`` float32 tensors; every epoch draws a
 seeded permutation of the ``3 S`` (sample, view) pairs — the paper's threefold augmentation:
 original, horizontal flip, vertical flip; ``rot180`` adds both flips, a 180-degree turn, as a
-fourth view — and ``get_batch`` gathers and flips them. Epoch ``e``
+fourth view — and ``get_batch`` gathers and flips them (``shift_px`` then moves each at random,
+`learn.augment`). Epoch ``e``
 reseeds torch from ``(seed, e)``, so a resumed run equals an uninterrupted one on CPU.
 """
 
@@ -24,6 +25,7 @@ import torch
 from torch import nn
 from tqdm.auto import tqdm
 
+from learn.augment import random_shift
 from learn.averaging import make_ema
 from learn.checkpoint import (
     BEST,
@@ -113,6 +115,7 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
                            desc=f"epoch {epoch + 1}/{run.train.epochs}", leave=False)  # fmt: skip
     for start in bar:
         x, y = get_batch(data, order[start : start + run.train.batch_size], views)
+        x, y = random_shift(x, y, run.shift_px)
         value = train_step(model, loss_fn, optimizer, x, y, run.task, run.precision)
         total += value * len(y)
         bar.set_postfix(loss=f"{value:.4f}")

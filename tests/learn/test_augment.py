@@ -1,0 +1,80 @@
+"""Random translation of training batches (`learn.augment`, `RunConfig.shift_px`)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from learn.augment import random_shift
+from learn.train import fit, load_data
+from tactile.errors import ConfigError
+
+
+def shifted_reference(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """``a`` (..., H, W) moved by (dy, dx) pixels, zeros shifted in: a slow loop over pixels."""
+    out = np.zeros_like(a)
+    h, w = a.shape[-2:]
+    for r in range(h):
+        for c in range(w):
+            if 0 <= r - dy < h and 0 <= c - dx < w:
+                out[..., r, c] = a[..., r - dy, c - dx]
+    return out
+
+
+@pytest.mark.parametrize("channels", [1, 3])
+def test_images_and_label_images_move_together_as_a_pixel_loop_moves_them(channels):
+    rng = np.random.default_rng(0)
+    x = rng.random((6, channels, 7, 9)).astype(np.float32)
+    y = rng.integers(0, 7, (6, 7, 9))
+    gen = torch.Generator().manual_seed(3)
+    xs, ys = random_shift(torch.from_numpy(x), torch.from_numpy(y), 4, generator=gen)
+    shifts = torch.randint(-4, 5, (6, 2), generator=torch.Generator().manual_seed(3)).numpy()
+    assert np.abs(shifts).max() > 0
+    for i, (dy, dx) in enumerate(shifts):
+        np.testing.assert_array_equal(xs[i].numpy(), shifted_reference(x[i], dy, dx))
+        np.testing.assert_array_equal(ys[i].numpy(), shifted_reference(y[i], dy, dx))
+
+
+def test_class_targets_pass_through_and_zero_shift_is_the_identity():
+    x, y = torch.rand(4, 1, 5, 5), torch.tensor([0, 1, 1, 0])
+    xs, ys = random_shift(x, y, 2, generator=torch.Generator().manual_seed(0))
+    assert torch.equal(ys, y) and xs.shape == x.shape
+    assert random_shift(x, y, 0) == (x, y)
+    with pytest.raises(ValueError, match="max_px"):
+        random_shift(x, y, -1)
+
+
+def test_every_shift_in_range_is_drawn_uniformly():
+    x = torch.zeros(4000, 1, 11, 11)
+    x[:, 0, 5, 5] = 1.0  # a dot in the middle: where it lands is the shift
+    xs, _ = random_shift(x, torch.zeros(4000), 3, generator=torch.Generator().manual_seed(1))
+    where = xs[:, 0].flatten(1).argmax(1)
+    dy, dx = (where // 11 - 5).numpy(), (where % 11 - 5).numpy()
+    for d in (dy, dx):
+        counts = np.bincount(d + 3, minlength=7)
+        assert len(counts) == 7  # -3 .. 3, nothing beyond
+        # uniform: 4000 / 7 = 571 per value, binomial sd 22; allow 5 sd
+        assert np.all(np.abs(counts - 4000 / 7) < 5 * 22)
+
+
+def test_shift_is_range_checked_before_training():
+    from learn.train import RunConfig
+
+    with pytest.raises(ConfigError, match="shift_px"):
+        RunConfig(shift_px=-1)
+    with pytest.raises(ConfigError, match="shift_px"):
+        RunConfig(shift_px=35)  # input 68 x 100: at most 34
+
+
+def test_training_with_shifts_repeats_to_the_bit_and_differs_from_without(tiny_dataset, tiny_run):
+    torch.set_num_threads(1)
+    run = tiny_run("segnet", epochs=1)
+    data = load_data(tiny_dataset, run)
+    shifted = dataclasses.replace(run, shift_px=3)
+    a = fit(shifted, data, None, progress=False).history[0]["train_loss"]
+    b = fit(shifted, data, None, progress=False).history[0]["train_loss"]
+    plain = fit(run, data, None, progress=False).history[0]["train_loss"]
+    assert a == b and a != plain
