@@ -1,6 +1,6 @@
 """Labels of `handskin evaluate` report rows: a method's name, and what tells two rows of one
-method apart (input size, width, epochs, training precision, views, weight averaging, seed,
-training data, run folder).
+method apart (input size, width, epochs, training precision, views and shifts, weight
+averaging, seed, training data, run folder).
 Used by the report's tables (`learn.eval_report`) and by the charts drawn from report JSON."""
 
 from __future__ import annotations
@@ -107,10 +107,13 @@ def precision_label(r: dict) -> str:
 
 def views_label(r: dict) -> str:
     """The training views of a report row's network: ``no flips``, ``flips`` (the paper's
-    three views) or ``flips + 180°`` (`learn.train.RunConfig.rot180`, a fourth)."""
+    three views) or ``flips + 180°`` (`learn.train.RunConfig.rot180`, a fourth), then
+    `` + shifts ±<n> px`` for random shifts (`learn.train.RunConfig.shift_px`)."""
     cfg = r.get("config") or {}
     flips = "flips" if cfg.get("flips", True) else "no flips"
-    return flips + (" + 180°" if cfg.get("rot180") else "")
+    shift = cfg.get("shift_px") or 0
+    return flips + (" + 180°" if cfg.get("rot180") else "") + (f" + shifts ±{shift} px"
+                                                                if shift else "")
 
 
 def averaging_label(r: dict) -> str:

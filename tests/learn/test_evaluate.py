@@ -261,6 +261,8 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     turn = dict(s1, config={**long["config"], "rot180": True}, checkpoint="/r/t/best.pt")
     assert row_labels([s0, s1, turn]) == [
         "SegNet, flips, seed 0", "SegNet, flips, seed 1", "SegNet, flips + 180°"]
+    shifted = dict(s0, config={**long["config"], "shift_px": 8}, checkpoint="/r/sh/best.pt")
+    assert row_labels([s0, shifted]) == ["SegNet, flips", "SegNet, flips + shifts ±8 px"]
     # ... or with weight averaging (no ema_decay recorded: none), seed by seed
     ema = [dict(s, config={**s["config"], "train": {"epochs": 30, "ema_decay": 0.998}},
                 checkpoint=f"/r/e{s['seed']}/best.pt") for s in (s0, s1)]  # fmt: skip
