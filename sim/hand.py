@@ -38,9 +38,10 @@ fingertip pressed with 2-5 N on MuJoCo's tactile plate sink 2.5-3 mm and touch 1
 for hands of 15-22 cm (the chord of its capsule end; a pressed finger pad touches about 10-15 mm
 across; tests/sim/test_hand.py); the phalanx pads (5 x) flatten across the finger's width, so a
 finger lying on the link prints a stripe; the palm takes 2.75 x. Measured
-(320 forearm samples, seed 2020, forces of `sim.interactions`): median 42 active taxels per hand
-contact (quartiles 30 / 55), palm 0.51 of hand pixels (paper ~0.40), thumb 0.03, >= 3 fingers in
-88 % of grasps. History: one 3.5 mm allowance everywhere gave a median of 16 active taxels.
+(320 forearm samples, seed 2020, forces of `sim.interactions`, fingers spread): median 40 active
+taxels per hand contact (quartiles 30 / 56), palm 0.52 of hand pixels (paper ~0.40), >= 3 fingers
+in 85 % of grasps (before the spread: 42, 30 / 55, 0.51, 88 %). History: one 3.5 mm allowance
+everywhere gave a median of 16 active taxels.
 
 Labels. Collision geoms are named ``<prefix><part>_<segment>`` with part in `HAND_PARTS`
 (the thenar eminence on the first metacarpal is "palm"); `geom_parts` / `geom_part_ids` recover

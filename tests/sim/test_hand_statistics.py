@@ -2,9 +2,9 @@
 
 Albini & Cannata (IJRR 2020): the palm is about 40 % of hand-labelled pixels (Fig. 10); grasps
 show several fingers; seven actions from two operator positions plus free touches. Measured on
-the default forearm (64 modules at 10.6 mm pad pitch, seed 2020): median 42 active taxels per
-hand contact (quartiles 30 / 55), palm 0.51 of hand pixels, 0.88 of grasps with >= 3 fingers,
-no rejects in 320.
+the default forearm (64 modules at 10.6 mm pad pitch, seed 2020, fingers spread): median 40
+active taxels per hand contact (quartiles 30 / 56), palm 0.52 of hand pixels, 0.85 of grasps with
+>= 3 fingers, no rejects in 320 (before the finger spread: 42, 30 / 55, 0.51, 0.88).
 """
 
 from __future__ import annotations
