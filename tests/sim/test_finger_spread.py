@@ -66,10 +66,9 @@ def test_plan_refuses_a_preshape_joint_without_a_target():
         PressPlan(joint_targets={"a": 0.1}, preshape=("a", "b"))
 
 
-def joint_deg(ctx: EpisodeContext, subject: Subject, joint: str) -> np.ndarray:
+def joint_deg(scene: press.PressScene, subject: Subject, joint: str) -> np.ndarray:
     """(4,) angle (degrees) of finger joint ``joint`` (e.g. "mcp_abd") of index, middle, ring,
-    pinkie in the scene's current state."""
-    scene = ctx.scene(hand_contactor(subject))
+    pinkie of ``subject``'s hand in ``scene``'s current state."""
     m, d = scene.model, scene.data
     act = [scene.joint_act[joint_name(subject, f"{f}_{joint}")] for f in FINGERS]
     return np.rad2deg(d.qpos[m.jnt_qposadr[m.actuator_trnid[act, 0]]])
@@ -94,8 +93,8 @@ def test_the_spread_is_set_in_the_air_and_widens_the_pressed_fan():
         press.apply_tick(scene, sched, i)
         mujoco.mj_step(scene.model, scene.data, nstep=n_ctrl)
     want = [np.rad2deg(plan.joint_targets[joint_name(spread, f"{f}_mcp_abd")]) for f in FINGERS]
-    np.testing.assert_allclose(joint_deg(ctx, spread, "mcp_abd"), want, atol=1.0)
-    assert np.abs(joint_deg(ctx, spread, "mcp_flex")).max() < 1.0  # closes after landing
+    np.testing.assert_allclose(joint_deg(scene, spread, "mcp_abd"), want, atol=1.0)
+    assert np.abs(joint_deg(scene, spread, "mcp_flex")).max() < 1.0  # closes after landing
 
     fans = {}
     for habit in (0.0, 8.0):
@@ -107,7 +106,7 @@ def test_the_spread_is_set_in_the_air_and_widens_the_pressed_fan():
             plan = plan_hand_interaction("push_away", "front", subject, ctx.part, rng)
             last = run_episode(ctx, contactor, plan, np.random.default_rng(seed)).frames[-1]
             assert (last.geom >= 0).sum() >= 5
-            index, _, _, pinkie = joint_deg(ctx, subject, "mcp_abd")
+            index, _, _, pinkie = joint_deg(ctx.scene(contactor), subject, "mcp_abd")
             fan.append(index + pinkie)  # the angle between index and pinkie, degrees
         fans[habit] = np.mean(fan)
     assert fans[8.0] > fans[0.0] + 3.0
