@@ -277,7 +277,8 @@ def _ensemble_jobs(by_task: dict[str, list[Path]], tta: bool) -> list[tuple[list
     return [(paths, t) for paths in groups for t in ((False, True) if tta else (False,))]
 
 
-ImageOpt = _opt(Path | None, "A tactile image file (grey PNG/JPG, any size in pixels).")
+ImageOpt = _opt(Path | None, "A tactile image file (grey PNG/JPG, any size in pixels; taken "
+                "as 1 mm per pixel by a model with an input canvas).")
 FrameOpt = _opt(Path | None, "A taxel frame (.csv row or .npy) of N taxel or C channel values.")
 MapOpt = _opt(Path | None, "For --frame: a dataset folder (its map; values are raw counts, "
               "converted to Pa) or a layout file (values taken as Pa).", "--map")

@@ -28,6 +28,12 @@ class ModelConfig:
     in_channels: int = 1  # tactile images are grey; 3 only to take ImageNet-style weights as-is
     width: float | None = None  # channel multiplier (1.0 = VGG16's 64..512); None = model default
     input_size: tuple[int, int] = (68, 100)  # (H, W) px: the paper's resized tactile image
+    # (H, W) mm of map the input covers, or None: each map is stretched to input_size (the
+    # paper). Given, every tactile image is centred on this canvas (zero-padded or cropped,
+    # `tactile.resize.fit_canvas`) before the resize, so a millimetre of any part's map is the
+    # same number of input pixels: a model moved to a smaller part sees prints at the size it
+    # was trained on. Set it to the training part's map size (the forearm: 229 x 383 mm).
+    canvas_mm: tuple[float, float] | None = None
     # HandsNet only: start the last fully connected layer at zero weights (*ours*, not the
     # paper's). With Adam and Glorot init the narrow ReLU head (64 -> 32 behind 60 %/50 %
     # dropout) dies within ~20 steps on sparse tactile images and the loss sits at chance.
@@ -38,6 +44,9 @@ class ModelConfig:
         _require(self.in_channels >= 1, "ModelConfig.in_channels must be >= 1")
         _require(self.width is None or self.width > 0, "ModelConfig.width must be > 0")
         _require(min(self.input_size) >= 1, "ModelConfig.input_size must be positive pixels")
+        _require(self.canvas_mm is None or min(self.canvas_mm) > 0,
+                 f"ModelConfig.canvas_mm = {self.canvas_mm}: give (H, W) > 0 mm, e.g. "
+                 "[229, 383] (the forearm map), or leave it out to stretch each map")
 
     def kwargs(self) -> dict[str, object]:
         """Keyword arguments of ``create_model(self.arch, **kwargs)``."""

@@ -92,7 +92,7 @@ def cross_validate(run: RunConfig, path: str | Path, grid: Mapping[str, Sequence
     """k-fold CV of every grid point on the train split of ``path`` (dataset or image folder)."""
     runs = grid_runs(run, grid)
     ds = open_split(Path(path), "train", run.task, run.model.input_size, hand_classes,
-                    run.train.seed)  # fmt: skip
+                    run.train.seed, run.model.canvas_mm)  # fmt: skip
     full = materialize(ds, "train")
     rows = []
     for changes, cfg in runs:

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from learn.inputs import net_input
+from learn.inputs import input_canvas, net_input, net_labels
 from learn.tta import PAPER_VIEWS, flip_array
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
@@ -30,7 +30,7 @@ from tactile.faults import (
     stuck_at,
     zero_taxels,
 )
-from tactile.resize import NET_SIZE, resize_labels
+from tactile.resize import NET_SIZE
 from tactile.tactile_map import TactileMap
 
 TASKS = ("classify", "segment")
@@ -119,6 +119,8 @@ class TorchTactileDataset(Dataset):
     hand_only : keep only hand samples (``is_hand == 1``). None (default): True for "segment"
         (the paper segments hand images only: a non-hand print has no parts to find), False for
         "classify". Needs the ``is_hand`` field when True.
+    canvas_mm : (H, W) mm or None (``ModelConfig.canvas_mm``): each image and label image is
+        centred on a canvas of this size (`learn.inputs.net_input`) before the resize to ``size``.
 
     Items: ``(image, target)``, image (1, h, w) float32 in [0, 1].
     """
@@ -132,6 +134,7 @@ class TorchTactileDataset(Dataset):
         flips: bool = True,
         faults: FaultSpec | FaultFn | None = None,
         hand_only: bool | None = None,
+        canvas_mm: tuple[float, float] | None = None,
     ) -> None:
         if task not in TASKS:
             raise ConfigError(f"unknown task {task!r}; choices: {', '.join(TASKS)}")
@@ -142,6 +145,7 @@ class TorchTactileDataset(Dataset):
         self.hand_only = task == "segment" if hand_only is None else bool(hand_only)
         with self.reader:
             self._check_fields()
+            self.canvas = input_canvas(canvas_mm, self.reader.map.step_mm)
             n = len(self.reader)
             indices = np.arange(n) if split is None else np.asarray(self.reader.splits[split])
             if self.hand_only and "is_hand" in self.reader.fields:
@@ -174,12 +178,12 @@ class TorchTactileDataset(Dataset):
         image, labels = self.image_and_labels(i)
         x = image.astype(np.float32) / np.float32(255.0)
         if self.size is not None:
-            x = net_input(x, self.size, self.task)
+            x = net_input(x, self.size, self.task, self.canvas)
         x = torch.from_numpy(np.ascontiguousarray(flip_array(x, PAPER_VIEWS[view])))[None]
         if self.task == "classify":
             return x, torch.tensor(int(self.reader.is_hand[i]), dtype=torch.int64)
         if self.size is not None:
-            labels = resize_labels(labels, self.size)
+            labels = net_labels(labels, self.size, self.canvas)
         labels = np.ascontiguousarray(flip_array(labels, PAPER_VIEWS[view]))
         return x, torch.from_numpy(labels.astype(np.int64))
 

@@ -64,6 +64,7 @@ SHARED = (
     ("class names", lambda m: tuple(m.ckpt.get("class_names") or ())),
     ("input channels", lambda m: m.run.model.in_channels),
     ("input size (h, w) px", lambda m: tuple(m.run.model.input_size)),
+    ("input canvas (h, w) mm", lambda m: m.run.model.canvas_mm),
 )
 
 
@@ -84,7 +85,7 @@ def check_members(members: Sequence[Member]) -> None:
                 raise ConfigError(
                     f"ensemble members differ in {what}: {first.path} has {get(first)!r}, "
                     f"{m.path} has {get(m)!r}. Fix: average only networks trained for the same "
-                    "task, classes and input size")  # fmt: skip
+                    "task, classes, input size and canvas")  # fmt: skip
 
 
 def load_members(paths: Sequence[str | Path]) -> list[Member]:

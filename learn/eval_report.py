@@ -120,6 +120,11 @@ def _timing(r: dict) -> str:
             f"(bf16 {'on' if r['bf16'] else 'off'}); GPU {gpu}")  # fmt: skip
 
 
+def _canvas_text(r: dict) -> str:
+    canvas = r.get("canvas_mm")  # (H, W) mm of the input canvas; absent or None: stretched
+    return "" if canvas is None else f" of a {canvas[0]:g} × {canvas[1]:g} mm canvas"
+
+
 def _details(r: dict, label: str) -> list[str]:
     names = tuple(r["class_names"]) or tuple(str(i) for i in range(len(r["cm"])))
     epoch = "" if r["epoch"] is None else f"epoch {r['epoch']}, "
@@ -129,7 +134,8 @@ def _details(r: dict, label: str) -> list[str]:
             f"({epoch}{seed}{r['n_test']} test images)", "",
             f"Trained on: {trained_on(r)}.{_init_text(r)}", "", *_members_text(r),
             *([note, ""] if (note := leakage_note(r.get("shared_with_training"))) else []),
-            f"{_timing(r)}; input (h, w) = {tuple(size)} px.", "", *_tta_text(r),
+            f"{_timing(r)}; input (h, w) = {tuple(size)} px{_canvas_text(r)}.", "",
+            *_tta_text(r),
             "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
             "", "Confusion matrix, % of each true class:", "",
             confusion_markdown(torch.tensor(r["cm"]), names), "",
@@ -276,9 +282,8 @@ def _confidence(error: dict) -> str:
 def _segmenter_sheet(r: dict, label: str, data: str | Path, path: Path) -> None:
     """Pairs of tiles: truth, then prediction, of the images whose maps the row carries."""
     from learn.breakdown import unpack_labels
-    from learn.inputs import net_input
+    from learn.inputs import input_canvas, net_input, net_labels
     from tactile.dataset.reader import DatasetReader
-    from tactile.resize import resize_labels
     from tactile.sheet import save_contact_sheet
 
     pred = unpack_labels(r["worst"]["maps"])
@@ -286,8 +291,10 @@ def _segmenter_sheet(r: dict, label: str, data: str | Path, path: Path) -> None:
     size = tuple(r.get("input_size") or r["config"]["model"]["input_size"])
     with DatasetReader(data) as reader:
         image = np.stack([reader.image[w["index"]] for w in worst]) / 255.0
-        truth = resize_labels(np.stack([reader.label_image[w["index"]] for w in worst]), size)
-    x = np.round(255 * net_input(image, size, "segment")).astype(np.uint8)
+        canvas = input_canvas(r.get("canvas_mm"), reader.map.step_mm)
+        truth = net_labels(np.stack([reader.label_image[w["index"]] for w in worst]), size,
+                           canvas)  # fmt: skip
+    x = np.round(255 * net_input(image, size, "segment", canvas)).astype(np.uint8)
     titles = []
     for w in worst:
         titles += [f"#{w['index']} truth\n{w.get('action', '')}, "

@@ -280,7 +280,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     ckpt = first.ckpt
     hand = hand_classes or (ckpt.get("data") or {}).get("hand_classes")
     split = open_split(Path(data_path), "test", run.task, run.model.input_size, hand,
-                       run.train.seed)  # fmt: skip
+                       run.train.seed, run.model.canvas_mm)  # fmt: skip
     test = materialize(split, "test")
     n_cls = run.model.num_classes
     on_dataset = is_dataset(data_path)
@@ -328,6 +328,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
            "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
            "config": ckpt["config"], "input_size": list(size),
+           "canvas_mm": run.model.canvas_mm and list(run.model.canvas_mm),
            "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
            "init": ckpt.get("init"),
            "shared_with_training": shared_with_training(ckpt.get("data"), data_path),

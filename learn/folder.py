@@ -29,7 +29,7 @@ from learn.losses import class_pixel_counts, median_frequency_weights
 from learn.tta import PAPER_VIEWS, flip_array
 from tactile.dataset.reader import DATASET, DatasetReader
 from tactile.dataset.splits import split_indices
-from tactile.errors import DataError
+from tactile.errors import ConfigError, DataError
 from tactile.labels import CLASS_NAMES, PALETTE
 from tactile.resize import resize_labels
 
@@ -174,12 +174,21 @@ def class_weights(y: torch.Tensor, num_classes: int) -> np.ndarray:
     return median_frequency_weights(counts, np.full(num_classes, counts.sum()))
 
 
-def open_split(path: Path, split: str, task: str, size, hand_classes, seed: int) -> Dataset:
-    """An un-flipped torch dataset of ``split`` from a handskin dataset or an image folder."""
+def open_split(path: Path, split: str, task: str, size, hand_classes, seed: int,
+               canvas_mm: tuple[float, float] | None = None) -> Dataset:  # fmt: skip
+    """An un-flipped torch dataset of ``split`` from a handskin dataset or an image folder;
+    ``canvas_mm`` (``ModelConfig.canvas_mm``) needs a dataset, whose map grid is in mm."""
     from learn.data import TorchTactileDataset
 
     if is_dataset(path):
-        return TorchTactileDataset(path, split=split, task=task, size=size, flips=False)
+        return TorchTactileDataset(path, split=split, task=task, size=size, flips=False,
+                                   canvas_mm=canvas_mm)  # fmt: skip
+    if canvas_mm is not None:
+        raise ConfigError(
+            f"{path} is an image folder, whose pixels have no known size in mm, and the model "
+            f"centres its inputs on a {canvas_mm} mm canvas (model.canvas_mm). Fix: ingest the "
+            "recordings as a dataset (handskin ingest, with the part's layout), or use a model "
+            "without canvas_mm")
     return FolderDataset(path, split, task, size, False, hand_classes, seed=seed)
 
 
@@ -224,9 +233,11 @@ def load_data(path: str | Path, run, *, hand_classes: Sequence[str] | None = Non
     """Train (minus a subject-disjoint validation part), validation and test tensors of ``path``
     for ``run`` (a ``learn.train.RunConfig``: task, input size, val_fraction, seed)."""
     path, seed, size = Path(path), run.train.seed, run.model.input_size
-    train_ds = open_split(path, "train", run.task, size, hand_classes, seed)
+    canvas = run.model.canvas_mm
+    train_ds = open_split(path, "train", run.task, size, hand_classes, seed, canvas)
     train_ds, val_ds = validation_split(train_ds, run.val_fraction, seed)
-    test_ds = open_split(path, "test", run.task, size, hand_classes, seed) if with_test else None
+    test_ds = (open_split(path, "test", run.task, size, hand_classes, seed, canvas)
+               if with_test else None)  # fmt: skip
     names = _class_names(train_ds, run.task)
     desc = {"path": str(path), "kind": "dataset" if is_dataset(path) else "folder",
             "hand_classes": None if hand_classes is None else list(hand_classes),

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tactile.resize import resize_image
+from tactile.resize import canvas_px, fit_canvas, resize_image, resize_labels
 
 #: The rule of `net_input`, stored in every checkpoint (``learn.checkpoint``): segmentation
 #: inputs on their labels' support since this name; a segmenter without it was trained on
@@ -13,12 +13,33 @@ from tactile.resize import resize_image
 INPUTS = "segment-on-label-support"
 
 
-def net_input(image01: np.ndarray, size: tuple[int, int], task: str) -> np.ndarray:
+def net_input(image01: np.ndarray, size: tuple[int, int], task: str,
+              canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
     """Network input of image(s) (H, W) or (B, H, W) float scaled to [0, 1]: the anti-aliased
     resize to ``size`` (h, w) px; for ``task == "segment"`` kept on the support its nearest-
     neighbour labels have (`tactile.resize.resize_image` ``keep_support``), so that zero input
-    is background in the labels too. Same shape as ``image01`` with (h, w) last, same dtype."""
+    is background in the labels too. ``canvas`` (H', W') map pixels (`input_canvas`): centred
+    on it first (`tactile.resize.fit_canvas`). Same shape as ``image01`` with (h, w) last,
+    same dtype."""
+    if canvas is not None:
+        image01 = fit_canvas(image01, canvas)
     return resize_image(image01, size, keep_support=task == "segment")
+
+
+def net_labels(labels: np.ndarray, size: tuple[int, int],
+               canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
+    """Label image(s) (H, W) or (B, H, W) at the network's (h, w): centred on ``canvas`` (map
+    pixels) when given, then the nearest-neighbour resize (`tactile.resize.resize_labels`).
+    Same dtype."""
+    if canvas is not None:
+        labels = fit_canvas(labels, canvas)
+    return resize_labels(labels, size)
+
+
+def input_canvas(canvas_mm: tuple[float, float] | None, step_mm: float) -> tuple[int, int] | None:
+    """Map pixels (H', W') of a model's ``canvas_mm`` (``ModelConfig``) on a map grid of
+    ``step_mm`` mm per pixel; None stays None (stretch each map to the input)."""
+    return None if canvas_mm is None else canvas_px(canvas_mm, step_mm)
 
 
 def unpressed_as_background(pred, x):

@@ -27,13 +27,13 @@ from matplotlib.figure import Figure
 from learn.checkpoint import load_checkpoint
 from learn.evaluate import fast_inference, tta_views
 from learn.folder import is_dataset, read_grey
-from learn.inputs import net_input
+from learn.inputs import input_canvas, net_input
 from learn.tta import FlipTTA
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 from tactile.labels import PartSummary, backproject, part_summary
 from tactile.layout import TaxelLayout
-from tactile.resize import resize_labels
+from tactile.resize import fit_canvas, resize_labels
 from tactile.tactile_map import TactileMap
 
 
@@ -45,10 +45,17 @@ class Predictor:
     task: str  # "classify" | "segment"
     input_size: tuple[int, int]  # (h, w) px of the network input
     class_names: tuple[str, ...]
+    canvas_mm: tuple[float, float] | None = None  # ModelConfig.canvas_mm: (H, W) mm, or None
 
-    def logits(self, image: np.ndarray) -> torch.Tensor:
-        """Logits of one (H, W) uint8 image (resized to the input): (C,) or (C, h, w)."""
-        x = net_input(np.asarray(image, np.float32) / 255.0, self.input_size, self.task)
+    def canvas(self, step_mm: float) -> tuple[int, int] | None:
+        """(H', W') map pixels of the model's canvas on a grid of ``step_mm`` mm, or None."""
+        return input_canvas(self.canvas_mm, step_mm)
+
+    def logits(self, image: np.ndarray, step_mm: float = 1.0) -> torch.Tensor:
+        """Logits of one (H, W) uint8 image on a map grid of ``step_mm`` mm per pixel (used
+        only with a canvas), made into the network input: (C,) or (C, h, w)."""
+        x = net_input(np.asarray(image, np.float32) / 255.0, self.input_size, self.task,
+                      self.canvas(step_mm))  # fmt: skip
         with torch.inference_mode():
             return self.model(torch.from_numpy(x)[None, None])[0].float()
 
@@ -75,7 +82,7 @@ def load_predictor(path: str | Path | Sequence[str | Path], tta: bool = False) -
     _, ckpt, _, run = members[0]
     names = tuple(ckpt.get("class_names") or ())
     net = nets[0] if len(nets) == 1 else MeanSoftmax(nets)
-    return Predictor(net, run.task, run.model.input_size, names)
+    return Predictor(net, run.task, run.model.input_size, names, run.model.canvas_mm)
 
 
 @dataclass
@@ -94,30 +101,36 @@ class Prediction:
     threshold_pa: float = 0.0  # a taxel counts as pressed in ``parts`` above this pressure, Pa
 
 
-def classify(pred: Prediction, clf: Predictor) -> None:
-    """Fill ``class_name`` and ``probability`` from a classifier."""
-    probs = clf.logits(pred.image).softmax(0)
+def classify(pred: Prediction, clf: Predictor, step_mm: float = 1.0) -> None:
+    """Fill ``class_name`` and ``probability`` from a classifier (``step_mm``: the image's
+    grid, mm per pixel)."""
+    probs = clf.logits(pred.image, step_mm).softmax(0)
     k = int(probs.argmax())
     pred.class_name = clf.class_names[k] if k < len(clf.class_names) else str(k)
     pred.probability = float(probs[k])
 
 
-def segment(image: np.ndarray, seg: Predictor) -> np.ndarray:
-    """(H, W) uint8 classes: the network's labels resized back, 0 where the image is 0."""
-    labels = seg.logits(image).argmax(0).numpy().astype(np.uint8)
+def segment(image: np.ndarray, seg: Predictor, step_mm: float = 1.0) -> np.ndarray:
+    """(H, W) uint8 classes: the network's labels resized back (and off its canvas, if it has
+    one), 0 where the image is 0. ``step_mm``: the image's grid, mm per pixel."""
+    labels = seg.logits(image, step_mm).argmax(0).numpy().astype(np.uint8)
+    canvas = seg.canvas(step_mm)
+    if canvas is not None:
+        labels = fit_canvas(resize_labels(labels, canvas), image.shape)
     return np.where(image > 0, resize_labels(labels, image.shape), 0).astype(np.uint8)
 
 
 def predict_image(image: np.ndarray, clf: Predictor | None = None,
-                  seg: Predictor | None = None) -> Prediction:  # fmt: skip
-    """Class and segmentation of one (H, W) uint8 tactile image."""
+                  seg: Predictor | None = None, step_mm: float = 1.0) -> Prediction:  # fmt: skip
+    """Class and segmentation of one (H, W) uint8 tactile image on a map grid of ``step_mm``
+    mm per pixel (the default map's 1 mm; it matters only to a model with a canvas)."""
     if clf is None and seg is None:
         raise DataError("give a classifier, a segmenter or both")
     pred = Prediction(np.asarray(image, np.uint8))
     if clf is not None:
-        classify(pred, clf)
+        classify(pred, clf, step_mm)
     if seg is not None:
-        pred.segmentation = segment(pred.image, seg)
+        pred.segmentation = segment(pred.image, seg, step_mm)
     return pred
 
 
@@ -130,7 +143,8 @@ def predict_frame(p: np.ndarray, tmap: TactileMap, clf: Predictor | None = None,
     p = np.asarray(p, np.float64)
     if p.shape != (tmap.n_taxels,):
         raise DataError(f"frame has shape {p.shape}; the map has {tmap.n_taxels} taxels")
-    return attach_taxels(predict_image(tmap.image(p), clf, seg), tmap, p, threshold_pa)
+    return attach_taxels(predict_image(tmap.image(p), clf, seg, tmap.step_mm), tmap, p,
+                         threshold_pa)  # fmt: skip
 
 
 def attach_taxels(pred: Prediction, tmap: TactileMap, p: np.ndarray,
@@ -185,8 +199,8 @@ def predict_sample(sample: Sample, clf: Predictor | None = None,
                    seg: Predictor | None = None) -> Prediction:  # fmt: skip
     """Prediction of a dataset sample (its stored image), ground truth attached; parts count
     the taxels above the dataset's active threshold (``sample.threshold_pa``)."""
-    pred = attach_taxels(predict_image(sample.image, clf, seg), sample.tmap, sample.pressure,
-                         sample.threshold_pa)  # fmt: skip
+    pred = attach_taxels(predict_image(sample.image, clf, seg, sample.tmap.step_mm), sample.tmap,
+                         sample.pressure, sample.threshold_pa)  # fmt: skip
     pred.true_segmentation, pred.true_labels = sample.true_segmentation, sample.true_labels
     return pred
 

@@ -82,10 +82,12 @@ def method_label(r: dict) -> str:
 
 
 def size_label(r: dict) -> str:
-    """``<h> x <w> px``, a report row's network input size."""
+    """``<h> x <w> px``, a report row's network input size, then `` on a <H> x <W> mm canvas``
+    when its images are centred on one (``ModelConfig.canvas_mm``)."""
     model = (r.get("config") or {}).get("model") or {}
     h, w = r.get("input_size") or model.get("input_size") or ModelConfig().input_size
-    return f"{h} x {w} px"
+    canvas = r.get("canvas_mm") or model.get("canvas_mm")
+    return f"{h} x {w} px" + (f" on a {canvas[0]:g} x {canvas[1]:g} mm canvas" if canvas else "")
 
 
 def epochs_label(r: dict) -> str:

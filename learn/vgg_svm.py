@@ -82,6 +82,10 @@ class VggSvmClassifier:
         if run.model.arch != "vgg16":
             raise ConfigError(f"{path} is a {run.model.arch} checkpoint; VGG16 + SVM needs a "
                               "vgg16 one (handskin train --arch vgg16)")  # fmt: skip
+        if run.model.canvas_mm is not None:
+            raise ConfigError(f"{path} centres its inputs on a {run.model.canvas_mm} mm canvas; "
+                              "VGG16 + SVM reads images stretched to the input. Fix: a VGG16 "
+                              "trained without model.canvas_mm")  # fmt: skip
         return cls(model, cfg, seed=seed, run_config=ckpt["config"])
 
     @property

@@ -99,3 +99,45 @@ def resize_labels(lbl: np.ndarray, size: tuple[int, int] = NET_SIZE) -> np.ndarr
 def _nearest(n_in: int, n_out: int) -> np.ndarray:
     """Source index of each of ``n_out`` output samples over ``n_in`` inputs (centre rule)."""
     return np.minimum(((np.arange(n_out) + 0.5) * n_in / n_out).astype(np.int64), n_in - 1)
+
+
+def canvas_px(canvas_mm: tuple[float, float], step_mm: float) -> tuple[int, int]:
+    """(H, W) map-grid pixels of a canvas of ``canvas_mm`` (H, W) mm on a grid of ``step_mm``
+    mm per pixel (rounded, at least 1)."""
+    if step_mm <= 0:
+        raise ConfigError(f"grid step must be > 0 mm, got {step_mm}")
+    return tuple(max(1, round(float(c) / step_mm)) for c in canvas_mm)
+
+
+def fit_canvas(img: np.ndarray, canvas: tuple[int, int]) -> np.ndarray:
+    """Centre a tactile or label image (or a batch) on a canvas of (H', W') pixels: zero-padded
+    where the canvas is larger, centre-cropped where it is smaller, at the same pixel scale.
+
+    With the canvas's size the same on every part, a resize to a network input maps one
+    millimetre of every part's map to the same number of input pixels, so a hand's print has
+    the same size in pixels on a small part as on a large one. Applied with the image's own
+    (H, W), it is its own inverse wherever nothing was cropped: ``fit_canvas(fit_canvas(a, c),
+    a.shape[-2:])`` equals ``a`` when the canvas is at least the image's size.
+
+    Parameters
+    ----------
+    img : (H, W) or (B, H, W), any dtype. canvas : (H', W') pixels.
+
+    Returns
+    -------
+    (H', W') or (B, H', W'), same dtype; pixel (i, j) of the input lands at
+    (i + (H' - H) // 2, j + (W' - W) // 2) when padding, at (i - (H - H') // 2, j - (W - W')
+    // 2) when cropping (pixels falling outside are dropped).
+    """
+    img = np.asarray(img)
+    ch, cw = _check(img, canvas)
+    out = np.zeros((*img.shape[:-2], ch, cw), dtype=img.dtype)
+    src, dst = [], []
+    for n_in, n_out in zip(img.shape[-2:], (ch, cw), strict=True):
+        # where input index 0 lands: the same split of the margin when padding and cropping
+        off = (n_out - n_in) // 2 if n_out >= n_in else -((n_in - n_out) // 2)
+        lo, hi = max(0, off), min(n_out, off + n_in)
+        dst.append(slice(lo, hi))
+        src.append(slice(lo - off, hi - off))
+    out[..., dst[0], dst[1]] = img[..., src[0], src[1]]
+    return out

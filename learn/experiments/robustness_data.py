@@ -17,12 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
+from learn import inputs
 from learn.inputs import net_input
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 from tactile.labels import label_image
 from tactile.layout import TaxelLayout
-from tactile.resize import resize_labels
 from tactile.tactile_map import TactileMap
 
 #: First spawn-key element of each random stream derived from the one --seed (kept disjoint).
@@ -142,16 +142,20 @@ def images(tmap: TactileMap, p: np.ndarray) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros((0, *tmap.shape), np.uint8)
 
 
-def net_inputs(images_u8: np.ndarray, size: tuple[int, int], task: str) -> np.ndarray:
+def net_inputs(images_u8: np.ndarray, size: tuple[int, int], task: str,
+               canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
     """Network inputs (B, 1, h, w) float32 in [0, 1] of ``task``'s networks from images
-    (B, H, W) uint8, made as ``learn.data.TorchTactileDataset`` makes them (`learn.inputs`)."""
+    (B, H, W) uint8, made as ``learn.data.TorchTactileDataset`` makes them (`learn.inputs`;
+    ``canvas``: (H', W') map pixels of the model's canvas, or None)."""
     x = images_u8.astype(np.float32) / np.float32(255.0)
-    return net_input(x, tuple(size), task)[:, None] if len(x) else x[:, None, :0, :0]
+    return net_input(x, tuple(size), task, canvas)[:, None] if len(x) else x[:, None, :0, :0]
 
 
-def net_labels(labels: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Label images (B, H, W) at the network's (h, w) (nearest neighbour), int64."""
-    return resize_labels(labels, tuple(size)).astype(np.int64)
+def net_labels(labels: np.ndarray, size: tuple[int, int],
+               canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
+    """Label images (B, H, W) at the network's (h, w) (on its canvas, then nearest
+    neighbour; `learn.inputs.net_labels`), int64."""
+    return inputs.net_labels(labels, tuple(size), canvas).astype(np.int64)
 
 
 def stored_agreement(path: str | Path, frames: Frames) -> dict[str, float]:

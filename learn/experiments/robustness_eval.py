@@ -40,7 +40,7 @@ from learn.experiments.robustness_maps import (
     spot_pattern,
     warp_labels,
 )
-from learn.inputs import unpressed_as_background
+from learn.inputs import input_canvas, unpressed_as_background
 from learn.models import prepare_for_inference
 from tactile.errors import ConfigError
 from tactile.faults import nested_removal, zero_taxels
@@ -63,6 +63,7 @@ class Predictor:
         self.name, self.model, self.task = name, model.eval(), run.task
         self.net = prepare_for_inference(model) if fast else self.model
         self.size, self.num_classes = tuple(run.model.input_size), run.model.num_classes
+        self.canvas_mm = run.model.canvas_mm  # (H, W) mm or None (ModelConfig.canvas_mm)
         want = 2 if self.task == "classify" else 7
         if self.num_classes != want:
             raise ConfigError(f"{name}: a {self.task} network needs {want} classes for the "
@@ -73,6 +74,10 @@ class Predictor:
         """The network of a checkpoint (.pt)."""
         model, run = model_from_checkpoint(load_checkpoint(path))
         return cls(name, model, run, fast)
+
+    def canvas(self, step_mm: float) -> tuple[int, int] | None:
+        """(H', W') map pixels of the model's input canvas on a ``step_mm`` grid, or None."""
+        return input_canvas(self.canvas_mm, step_mm)
 
     def predict(self, x: np.ndarray, *, eval_mode: bool = False) -> np.ndarray:
         """Class ids: (B,) int64 per image, or (B, h, w) int64 per pixel, background where the
@@ -90,7 +95,8 @@ def fast_path_agreement(frames: Frames, models: Sequence[Predictor], n: int = 25
     out = {}
     for m in models:
         rows = (frames.classify if m.task == "classify" else frames.segment)[:n]
-        x = net_inputs(frames.tmap.image(frames.pressure_pa[rows]), m.size, m.task)
+        x = net_inputs(frames.tmap.image(frames.pressure_pa[rows]), m.size, m.task,
+                       m.canvas(frames.tmap.step_mm))  # fmt: skip
         out[m.name] = float((m.predict(x) == m.predict(x, eval_mode=True)).mean())
     return out
 
@@ -105,13 +111,15 @@ class Outputs:
     seg_images: np.ndarray
 
 
-def _predict_all(images: np.ndarray, models: Sequence[Predictor]) -> dict[str, np.ndarray]:
-    """Every model's predictions for images (B, H, W) uint8; inputs made once per size and task."""
+def _predict_all(images: np.ndarray, models: Sequence[Predictor],
+                 step_mm: float) -> dict[str, np.ndarray]:  # fmt: skip
+    """Every model's predictions for images (B, H, W) uint8 on a ``step_mm`` grid; inputs made
+    once per size, task and canvas."""
     out, inputs = {}, {}
     for m in models:
-        key = (m.size, m.task)
+        key = (m.size, m.task, m.canvas_mm)
         if key not in inputs:
-            inputs[key] = net_inputs(images, m.size, m.task)
+            inputs[key] = net_inputs(images, m.size, m.task, m.canvas(step_mm))
         out[m.name] = m.predict(inputs[key])
     return out
 
@@ -126,7 +134,8 @@ def run_rows(tmap, p: np.ndarray, is_clf: np.ndarray, is_seg: np.ndarray,
     for s in range(0, len(p), CHUNK):
         images = tmap.image(p[s : s + CHUNK])
         c, g = is_clf[s : s + CHUNK], is_seg[s : s + CHUNK]
-        parts.append((_predict_all(images[c], clfs), _predict_all(images[g], segs), images[g]))
+        parts.append((_predict_all(images[c], clfs, tmap.step_mm),
+                      _predict_all(images[g], segs, tmap.step_mm), images[g]))  # fmt: skip
     seg_images = np.concatenate([q[2] for q in parts]) if parts else np.zeros((0, *tmap.shape))
     return Outputs(_join(parts, 0, clfs), _join(parts, 1, segs), seg_images.astype(np.uint8))
 
@@ -155,7 +164,7 @@ def _cms(out: Outputs, frames: Frames, models: Sequence[Predictor], truth: np.nd
             target = frames.is_hand[frames.classify]
             cm = M.confusion_matrix(target, out.clf[m.name], 2)
         else:
-            target = net_labels(truth, m.size)
+            target = net_labels(truth, m.size, m.canvas(frames.tmap.step_mm))
             cm = M.confusion_matrix(target, out.seg[m.name], 7, ignore_index=IGNORE)
         cms[m.name] = cm.tolist()
     return cms

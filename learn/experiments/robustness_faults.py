@@ -30,6 +30,7 @@ from learn.experiments.robustness_data import (
     stream,
 )
 from learn.experiments.robustness_maps import RemovedMap, rebuild, spot_pattern, warp_labels
+from learn.inputs import input_canvas
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError
 from tactile.faults import dead_modules, gain_drift, nested_removal, zero_taxels
@@ -108,17 +109,17 @@ def faulty_copy(
 
 def faulty_copies(
     path: str | Path, ids: np.ndarray, task: str, size: tuple[int, int], copies: int,
-    mix: FaultMix, seed: int,
+    mix: FaultMix, seed: int, canvas_mm: tuple[float, float] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """(x (copies * S, 1, h, w) float32, y (copies * S,) or (copies * S, h, w) int64) of
-    dataset samples ``ids`` (S,), copy-major."""
+    dataset samples ``ids`` (S,), copy-major; ``canvas_mm``: the model's input canvas."""
     reader = DatasetReader(path)
     with reader:
         rows = read_rows(reader, ids)
         hand = reader.is_hand[:].astype(np.int64)[ids]
         tmap, layout = reader.map, reader.layout
     pool = removal_pool(tmap, layout, mix, seed)
-    segment = task == "segment"
+    segment, canvas = task == "segment", input_canvas(canvas_mm, tmap.step_mm)
     xs, ys = [], []
     for c in range(copies):
         for i, sample in enumerate(ids):
@@ -126,8 +127,8 @@ def faulty_copies(
             labels = rows["taxel_label"][i] if segment else None
             image, truth = faulty_copy(rows["pressure"][i], labels, tmap, layout.module_ids,
                                        pool, mix, rng)  # fmt: skip
-            xs.append(net_inputs(image[None], size, task))
-            ys.append(net_labels(truth[None], size) if segment else hand[i : i + 1])
+            xs.append(net_inputs(image[None], size, task, canvas))
+            ys.append(net_labels(truth[None], size, canvas) if segment else hand[i : i + 1])
     if not xs:
         return np.zeros((0, 1, *size), np.float32), np.zeros((0,), np.int64)
     return np.concatenate(xs), np.concatenate(ys)
@@ -144,13 +145,13 @@ def augmented_data(path: str | Path, run, n_train: int | None, copies: int, mix:
     if copies < 0:
         raise ConfigError(f"faulty copies must be >= 0, got {copies}")
     data, ids = split_data(path, run, n_train, seed, progress)
-    size = run.model.input_size
+    size, canvas = run.model.input_size, run.model.canvas_mm
     train = _with_copies(data.train, faulty_copies(path, ids["train"], run.task, size, copies,
-                                                   mix, seed))  # fmt: skip
+                                                   mix, seed, canvas))  # fmt: skip
     val = data.val
     if val is not None:
         val = _with_copies(val, faulty_copies(path, ids["val"], run.task, size, copies, mix,
-                                              seed))  # fmt: skip
+                                              seed, canvas))  # fmt: skip
     desc = {**data.description, "n_train": len(train.y), "n_val": 0 if val is None else
             len(val.y), "faulty_copies": copies}  # fmt: skip
     return Data(train, val, None, data.class_names, desc)

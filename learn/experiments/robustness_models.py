@@ -84,7 +84,7 @@ def split_data(path: str | Path, run, n_train: int | None, seed: int, progress: 
     from learn.folder import Data, materialize, open_split, subset, validation_split
 
     train_ds = open_split(Path(path), "train", run.task, run.model.input_size, None,
-                          run.train.seed)  # fmt: skip
+                          run.train.seed, run.model.canvas_mm)  # fmt: skip
     train_ds, val_ds = validation_split(train_ds, run.val_fraction, run.train.seed)
     rng = stream(seed, KEY_SUBSET, 1)
     if n_train is not None and n_train < len(train_ds.indices):

@@ -12,6 +12,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 import typer
 from matplotlib.image import imread
 from typer.testing import CliRunner
@@ -300,3 +301,34 @@ def test_cli_rejects_a_segmenter_given_as_classifier(tmp_path, checkpoints, sens
                                                 "--data", str(sensed_dataset), "--classifier",
                                                 str(checkpoints["segnet"])])  # fmt: skip
     assert res.exit_code == 2 and "holds a segnet network" in res.output
+
+
+def test_zero_corruption_keeps_a_models_canvas(sensed_dataset, checkpoints, tmp_path):
+    """A network with an input canvas (`ModelConfig.canvas_mm`) sees the same inputs in the
+    robustness tests as in `handskin evaluate`: its zero-corruption confusion matrices equal the
+    plain evaluation's on inputs made through `learn.data` (a canvas wider than the map and
+    shorter than it, so both padding and cropping happen)."""
+    canvas = [40.0, 120.0]
+    paths = {}
+    for arch in ("handsnet", "segnet"):
+        ckpt = load_checkpoint(checkpoints[arch])
+        model = dict(ckpt["config"]["model"], canvas_mm=canvas)
+        paths[arch] = tmp_path / f"{arch}.pt"
+        torch.save(dict(ckpt, config=dict(ckpt["config"], model=model)), paths[arch])
+    preds = [E.Predictor.load("HandsNet", paths["handsnet"], fast=False),
+             E.Predictor.load("SegNet", paths["segnet"], fast=False)]  # fmt: skip
+    frames = all_frames(sensed_dataset)
+    assert frames.tmap.shape[0] > canvas[0] and frames.tmap.shape[1] < canvas[1]
+    _, cms = E.zero_corruption(frames, preds)
+    model, run = model_from_checkpoint(load_checkpoint(paths["handsnet"]))
+    assert run.model.canvas_mm == tuple(canvas)
+    plain = evaluate_tensors(model, load_data(sensed_dataset, run, progress=False).test, 2)
+    assert cms["HandsNet"] == plain.cm.tolist()
+    seg, seg_run = model_from_checkpoint(load_checkpoint(paths["segnet"]))
+    ds = TorchTactileDataset(sensed_dataset, "test", "segment", seg_run.model.input_size, False,
+                             canvas_mm=seg_run.model.canvas_mm)  # fmt: skip
+    ds.indices = frames.sample_ids[frames.segment]
+    plain_seg = evaluate_tensors(seg, materialize(ds, progress=False), 7)
+    assert cms["SegNet"] == plain_seg.cm.tolist()
+    _, stretched = E.zero_corruption(frames, [E.Predictor.load("S", checkpoints["segnet"])])
+    assert stretched["S"] != cms["SegNet"]  # the canvas changed what the network saw
