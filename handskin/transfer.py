@@ -178,6 +178,10 @@ def transfer_command(
     precision: _opt(str, "Number format of every training forward pass here: fp32 or bf16 "
                     "(as handskin train --precision; about 1.6x faster on CPUs with native "
                     "bf16; no unit).") = "fp32",
+    keep_scale: _opt(bool, "Also run the forearm model at its own scale: each end-effector "
+                     "image centred on a canvas of the forearm map's size (mm) instead of "
+                     "stretched to the network input, so a millimetre is as many input pixels "
+                     "as on the forearm; adds 'forearm at scale' rows.") = False,
     models: _opt(Path | None, "Folder (path) of the models trained here and of every "
                  "fine-tuning result (finetune/*.json); default OUT/models; a rerun reuses them, "
                  "so a stopped run resumes.") = None,
@@ -196,6 +200,7 @@ def transfer_command(
                               "Fix: drop one of them")  # fmt: skip
         s = dataclasses.replace(base, seed=seed, segmentation=segmentation or segmenter is not None,
                                 classification=classification, precision=precision,
+                                keep_scale=keep_scale,
                                 **{k: v for k, v in changes.items() if v is not None})
         counts = {"n_target": n_target, "n_pretrain": n_pretrain, "n_source": n_source}
         plan = dataclasses.replace(QUICK_DATA if quick else DataPlan(), workers=workers,

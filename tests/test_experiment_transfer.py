@@ -166,6 +166,64 @@ def test_segmentation_alone(transfer_run, tmp_path):
         assert all(0 <= p["metrics"]["mean_iou"] <= 1 for p in points), points
 
 
+def test_keep_scale_feeds_the_forearm_model_images_centred_at_the_forearm_scale(
+        transfer_run, tmp_path, monkeypatch):  # fmt: skip
+    """--keep-scale adds "forearm at scale" rows: the forearm model is scored on end-effector
+    images zero-padded by hand to the forearm map's size (mm) before the resize (the very
+    tensor, and its score), it fine-tunes on the same subsets as the other starts, and the
+    report says so."""
+    from learn.experiments import transfer_lib
+
+    out, res = transfer_run
+    data = {role: out / "data" / T.FOLDERS[role] for role in T.ROLES}
+    ckpt = res["classify"]["forearm_checkpoint"]
+    s = dataclasses.replace(SETTINGS, keep_scale=True)
+    scored, score = [], transfer_lib.score
+    monkeypatch.setattr(transfer_lib, "score",
+                        lambda m, test, n: scored.append(test.x) or score(m, test, n))
+    got = T.run_transfer_experiment(tmp_path, s=s, plan=PLAN, progress=False, classifier=ckpt,
+                                    **data)["classify"]  # fmt: skip
+    model, run = model_from_checkpoint(load_checkpoint(ckpt))
+    with DatasetReader(data["source"]) as ds:
+        canvas = ds.map.shape  # 1 mm grid
+    with DatasetReader(data["target"]) as ds:
+        test = ds.splits["test"]
+        image = ds.image[np.sort(test)][np.argsort(np.argsort(test))].astype(np.float32) / 255
+        truth = ds.is_hand[:][test]
+    h, w = image.shape[1:]
+    top, left = (canvas[0] - h) // 2, (canvas[1] - w) // 2
+    assert top > 0 and left > 0  # the end-effector map is the smaller one: padding, no crop
+    padded = np.pad(image, ((0, 0), (top, canvas[0] - h - top), (left, canvas[1] - w - left)))
+    x = torch.from_numpy(resize_image(padded, run.model.input_size))[:, None]
+    assert any(t.shape == x.shape and torch.allclose(t, x, atol=1e-6) for t in scored)
+    assert not torch.allclose(scored[0], x, atol=1e-3)  # the stretched inputs differ
+    with torch.no_grad():
+        pred = model(x).argmax(1).numpy()
+    zero = got["zero_shot"]["forearm at scale"]["metrics"]["accuracy"]
+    assert zero == pytest.approx(np.mean(pred == truth))
+    assert got["canvas_mm"] == [float(c) for c in canvas]
+    assert list(got["curve"]) == ["scratch", "forearm", "synthetic EE", "forearm at scale"]
+    for k in range(3):
+        assert len({tuple(got["curve"][i][k]["samples"]) for i in got["curve"]}) == 1
+    assert got["curve"]["forearm"] == res["classify"]["curve"]["forearm"]  # unchanged rows
+    text = (tmp_path / "report.md").read_text()
+    assert "forearm model at its scale (canvas)" in text and "from forearm at scale %" in text
+    assert f"{canvas[0]} × {canvas[1]} mm canvas" in text
+
+
+def test_keep_scale_refuses_a_model_that_already_has_a_canvas(transfer_run, tmp_path):
+    _, res = transfer_run
+    ckpt = load_checkpoint(res["classify"]["forearm_checkpoint"])
+    ckpt["config"]["model"]["canvas_mm"] = [229.0, 383.0]
+    torch.save(ckpt, tmp_path / "canvas.pt")
+    from learn.experiments.transfer_lib import model_config
+
+    s = dataclasses.replace(SETTINGS, keep_scale=True)
+    with pytest.raises(ConfigError, match=r"already centres its inputs.*drop --keep-scale"):
+        model_config("classify", tmp_path / "canvas.pt", s)
+    assert model_config("classify", tmp_path / "canvas.pt", SETTINGS).canvas_mm == (229, 383)
+
+
 def test_a_cached_result_is_recomputed_when_its_key_differs(tmp_path):
     from learn.experiments.transfer_cache import cached
 

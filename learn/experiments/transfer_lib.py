@@ -12,7 +12,11 @@ is given):
    its samples whose object / body-part instance is in the target's test split left out);
 4. the learning curve: fine-tuning on N = ``curve_sizes`` and all end-effector train samples
    (nested, class-balanced prefixes of the train split, so subject- and instance-disjoint from
-   test) from scratch, from the forearm model and from the synthetic end-effector model.
+   test) from scratch, from the forearm model and from the synthetic end-effector model;
+5. with ``keep_scale``, steps 1, 2 and 4 again for the forearm model at its own scale
+   ("forearm at scale"): each end-effector image centred on a canvas of the forearm map's size
+   in mm (``ModelConfig.canvas_mm``) instead of stretched to the input, so that a hand's print
+   covers as many input pixels as on the forearm.
 
 Every fine-tuning result is kept under ``<models>/finetune/`` with its key
 (`learn.experiments.transfer_cache`), so a stopped run resumes at the next one.
@@ -31,6 +35,7 @@ from tactile.resize import NET_SIZE
 
 ARCH = {"classify": "handsnet", "segment": "segnet"}
 INITS = ("scratch", "forearm", "synthetic EE")
+AT_SCALE = "forearm at scale"  # the forearm model on a canvas of its map (keep_scale)
 
 
 @dataclass(frozen=True)
@@ -47,6 +52,7 @@ class TransferSettings:
     seed: int = 0
     threads: int = 2  # torch CPU threads
     precision: str = "fp32"  # training forward pass of every run here ("bf16": RunConfig.precision)
+    keep_scale: bool = False  # also the forearm model at its own mm per pixel (AT_SCALE rows)
 
     def __post_init__(self) -> None:
         if not self.curve_sizes or min(self.curve_sizes) < 1:
@@ -91,8 +97,21 @@ def model_config(task: str, checkpoint: Path | None, s: TransferSettings):
         if (model.arch in ("handsnet", "vgg16")) != (task == "classify"):
             raise ConfigError(f"{checkpoint} is a {model.arch} checkpoint, not a "
                               f"{'classifier' if task == 'classify' else 'segmenter'}")
+        if s.keep_scale and model.canvas_mm is not None:
+            raise ConfigError(f"{checkpoint} already centres its inputs on a {model.canvas_mm} "
+                              "mm canvas, so its 'forearm' rows keep its scale. Fix: drop "
+                              "--keep-scale")  # fmt: skip
         return model
     return dataclasses.replace(preset_run(ARCH[task]).model, input_size=s.input_size)
+
+
+def map_mm(path: Path) -> tuple[float, float]:
+    """(H, W) mm of the tactile map of the dataset at ``path``."""
+    from tactile.dataset.reader import DatasetReader
+
+    with DatasetReader(path) as ds:
+        shape, step = ds.map.shape, ds.map.step_mm
+    return (shape[0] * step, shape[1] * step)
 
 
 def drop_epoch(epochs: int) -> int:
@@ -247,13 +266,21 @@ def transfer_task(task: str, source: Path, target: Path, pretrain: Path, models_
 
     out["finetuned"] = finetune(run, data, order, index, forearm, progress,
                                 cache("forearm", len(hand)))  # fmt: skip
-    out["curve"] = {name: [] for name in INITS}
-    for name in INITS:
+    starts, scaled = {name: (inits[name], data) for name in INITS}, model
+    if s.keep_scale:  # the same forearm weights, fed the target's images at the forearm's scale
+        scaled = dataclasses.replace(model, canvas_mm=map_mm(source))
+        data_s = target_data(target, finetune_run(scaled, s, scratch=False), progress)[0]
+        out["zero_shot"][AT_SCALE] = score(forearm, data_s.test, n_cls)
+        out["canvas_mm"] = list(scaled.canvas_mm)
+        starts[AT_SCALE] = (forearm, data_s)
+    out["curve"] = {name: [] for name in starts}
+    for name, (init, d) in starts.items():
+        m = scaled if name == AT_SCALE else model
         for n in sizes:
             if name == "forearm" and n == len(hand):
                 out["curve"][name].append(out["finetuned"])
                 continue
-            ft = finetune_run(model, s, scratch=name == "scratch")
-            out["curve"][name].append(finetune(ft, data, order[:n], index, inits[name], progress,
+            ft = finetune_run(m, s, scratch=name == "scratch")
+            out["curve"][name].append(finetune(ft, d, order[:n], index, init, progress,
                                                cache(name, n)))  # fmt: skip
     return out

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from learn.experiments.report import Report, markdown_table
 from learn.experiments.transfer_lib import (
-    INITS,
+    AT_SCALE,
     TransferSettings,
     drop_epoch,
     model_config,
@@ -23,7 +23,8 @@ from learn.experiments.transfer_lib import (
 SEG_KEYS = (("pixel_accuracy", "Acc"), ("mean_accuracy", "mAcc"), ("mean_iou", "mIoU"),
             ("fw_iou", "fwIoU"))  # fmt: skip
 ZERO_SHOT = {"forearm": "forearm model (source part)",
-             "synthetic EE": "synthetic end-effector model (generator)"}  # fmt: skip
+             "synthetic EE": "synthetic end-effector model (generator)",
+             AT_SCALE: "forearm model at its scale (canvas)"}  # fmt: skip
 
 
 def _pct(value: float) -> float:
@@ -56,9 +57,10 @@ def curve_table(res: dict, key: str, what: str = "samples") -> str:
     """Learning curve: one row per N, one column per initialisation (score %); ``what`` the
     N counts ("samples", "hand samples")."""
     sizes = [p["n"] for p in res["curve"]["scratch"]]
-    body = [[n, *(_pct(res["curve"][i][k]["metrics"][key]) for i in INITS)]
+    inits = list(res["curve"])  # INITS, then AT_SCALE when asked for
+    body = [[n, *(_pct(res["curve"][i][k]["metrics"][key]) for i in inits)]
             for k, n in enumerate(sizes)]  # fmt: skip
-    return markdown_table([f"N (EE train {what})", *(f"from {i} %" for i in INITS)], body)
+    return markdown_table([f"N (EE train {what})", *(f"from {i} %" for i in inits)], body)
 
 
 def curve_chart(res: dict, key: str, label: str, what: str = "samples"):
@@ -69,7 +71,7 @@ def curve_chart(res: dict, key: str, label: str, what: str = "samples"):
     ax = fig.subplots()
     for i, (name, points) in enumerate(res["curve"].items()):
         n = [p["n"] for p in points]
-        ax.plot(n, [_pct(p["metrics"][key]) for p in points], "os^"[i] + "-", c=f"C{i}",
+        ax.plot(n, [_pct(p["metrics"][key]) for p in points], "os^D"[i] + "-", c=f"C{i}",
                 label=f"fine-tuned from {name} (ours)")  # fmt: skip
     for i, (name, r) in enumerate(res["zero_shot"].items()):
         ax.axhline(_pct(r["metrics"][key]), c=f"C{i + 1}", ls="--", lw=1,
@@ -89,6 +91,16 @@ def curve_chart(res: dict, key: str, label: str, what: str = "samples"):
     return fig
 
 
+def _scale_text(res: dict) -> str:
+    """How the AT_SCALE rows fed the images, when there are any."""
+    if "canvas_mm" not in res:
+        return ""
+    h, w = res["canvas_mm"]
+    return (f" (the \"at its scale\" rows: each image first centred on a {h:g} × {w:g} mm "
+            "canvas, the forearm map's size, so one mm is as many input pixels as on the "
+            "forearm)")
+
+
 def write_task(rep, task: str, res: dict) -> None:
     """Tables 15 and 16, confusions and the learning curve of one task into ``rep``."""
     title = "Classification" if task == "classify" else "Segmentation"
@@ -97,18 +109,24 @@ def write_task(rep, task: str, res: dict) -> None:
     zero = [(ZERO_SHOT[k], r) for k, r in res["zero_shot"].items()]
     rep.section(f"{title}: zero-shot on the end-effector (paper: Table 15)",
                 f"{res['n_test']} end-effector test {what}, resized to "
-                f"{res['model']['input_size']} px.\n\n" + scores_table(task, zero)
+                f"{res['model']['input_size']} px{_scale_text(res)}.\n\n"
+                + scores_table(task, zero)
                 + "\n\n" + confusions(zero, res["class_names"]))  # fmt: skip
     ft = [("forearm model, fine-tuned (Test C)", res["finetuned"]),
           ("synthetic end-effector model, fine-tuned (Test C)", res["curve"]["synthetic EE"][-1]),
           ("from scratch on end-effector data (Test C schedule)", res["curve"]["scratch"][-1])]
+    scaled = AT_SCALE in res["curve"]
+    if scaled:
+        ft.insert(1, ("forearm model at its scale, fine-tuned (Test C)",
+                      res["curve"][AT_SCALE][-1]))  # fmt: skip
     rep.section(f"{title}: fine-tuned on {res['n_train']} end-effector {what} (paper: Table 16)",
-                scores_table(task, ft) + "\n\n" + confusions(ft[:1], res["class_names"]))
+                scores_table(task, ft) + "\n\n"
+                + confusions(ft[: 1 + scaled], res["class_names"]))  # fmt: skip
     rep.section(f"{title}: learning curve ({label} %)", curve_table(res, key, what))
     rep.figure(curve_chart(res, key, label, what), f"curve_{task}.png",
                f"Test {label} against the number of end-effector training {what}, fine-tuned "
-               "with the Test C recipe from three starting points; dashed: zero-shot models. "
-               "The paper's Test C numbers are unknown to us, so none is drawn.")
+               f"with the Test C recipe from {len(res['curve'])} starting points; dashed: "
+               "zero-shot models. The paper's Test C numbers are unknown to us, so none is drawn.")
 
 
 def run_transfer(source: str | Path, target: str | Path, pretrain: str | Path, out: str | Path,
