@@ -36,6 +36,16 @@ def net_labels(labels: np.ndarray, size: tuple[int, int],
     return resize_labels(labels, size)
 
 
+def labels_on_map(labels: np.ndarray, shape: tuple[int, int],
+                  canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
+    """The way back of `net_labels`: network labels (h, w) to the map's (H, W) pixels, through
+    ``canvas`` (H', W') map pixels when the model has one (nearest neighbour, then off the
+    canvas). Same dtype."""
+    if canvas is None:
+        return resize_labels(labels, shape)
+    return fit_canvas(resize_labels(labels, canvas), shape)
+
+
 def input_canvas(canvas_mm: tuple[float, float] | None, step_mm: float) -> tuple[int, int] | None:
     """Map pixels (H', W') of a model's ``canvas_mm`` (``ModelConfig``) on a map grid of
     ``step_mm`` mm per pixel; None stays None (stretch each map to the input)."""

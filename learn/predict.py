@@ -27,13 +27,12 @@ from matplotlib.figure import Figure
 from learn.checkpoint import load_checkpoint
 from learn.evaluate import fast_inference, tta_views
 from learn.folder import is_dataset, read_grey
-from learn.inputs import input_canvas, net_input
+from learn.inputs import input_canvas, labels_on_map, net_input
 from learn.tta import FlipTTA
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 from tactile.labels import PartSummary, backproject, part_summary
 from tactile.layout import TaxelLayout
-from tactile.resize import fit_canvas, resize_labels
 from tactile.tactile_map import TactileMap
 
 
@@ -114,10 +113,8 @@ def segment(image: np.ndarray, seg: Predictor, step_mm: float = 1.0) -> np.ndarr
     """(H, W) uint8 classes: the network's labels resized back (and off its canvas, if it has
     one), 0 where the image is 0. ``step_mm``: the image's grid, mm per pixel."""
     labels = seg.logits(image, step_mm).argmax(0).numpy().astype(np.uint8)
-    canvas = seg.canvas(step_mm)
-    if canvas is not None:
-        labels = fit_canvas(resize_labels(labels, canvas), image.shape)
-    return np.where(image > 0, resize_labels(labels, image.shape), 0).astype(np.uint8)
+    back = labels_on_map(labels, image.shape, seg.canvas(step_mm))
+    return np.where(image > 0, back, 0).astype(np.uint8)
 
 
 def predict_image(image: np.ndarray, clf: Predictor | None = None,
