@@ -39,7 +39,8 @@ def fidelity_command(
     workers: Annotated[int | None, typer.Option("--workers", help="Generator processes "
                        "(processes; default: all cores).")] = None,
     part: Annotated[str, typer.Option("--part", help="Skin part (name: forearm, forearm_8mm, "
-                    "end_effector, plate, or a link mesh .stl/.obj in metres).")] = "forearm",
+                    "forearm_x2, forearm_x4, end_effector, plate, or a link mesh .stl/.obj in "
+                    "metres).")] = "forearm",
     segnet: Annotated[bool, typer.Option("--segnet", help="Also train SegNet on each setting "
                       "and report its mean IoU (%) (slow: hours at full size).")] = False,
     progress: Annotated[bool, typer.Option("--progress/--no-progress",

@@ -28,7 +28,8 @@ def _fail(err: Exception) -> typer.Exit:
 
 def part_command(
     name: Annotated[
-        str, typer.Argument(help="Part name: forearm, end_effector or plate.")
+        str, typer.Argument(help="Part name: forearm, forearm_8mm, forearm_x2, forearm_x4, "
+                   "end_effector or plate.")
     ] = "forearm",
     mesh: Annotated[
         Path | None,
@@ -149,7 +150,8 @@ def generate_command(
     out: Annotated[Path, typer.Option(help="Dataset folder (path): new, empty, or a run of the "
                                            "same configuration to resume.")],
     part: Annotated[str | None, typer.Option(
-        help="Part: forearm, end_effector, plate, or a link mesh file .stl/.obj (metres). "
+        help="Part: forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector, plate, or a "
+             "link mesh file .stl/.obj (metres). "
              "Default: forearm.")] = None,
     n: Annotated[int | None, typer.Option(
         "--n", help="Number of samples (count). Default: 3530 as in the paper.")] = None,

@@ -18,7 +18,7 @@ import numpy as np
 import trimesh
 
 from sim import geometry
-from sim.tiling import PlaneRegion, Tiling, TubeRegion, tile
+from sim.tiling import PlaneRegion, Tiling, TubeRegion, module_lattice, tile
 from tactile.errors import ConfigError
 from tactile.layout import TaxelLayout
 from tactile.surface import triangulate
@@ -71,6 +71,40 @@ FOREARM_8MM_TILING = Tiling(
         ".XXX...XXXX..X..",
     ),
 )
+def finer_forearm_tiling(n_rows: int) -> Tiling:
+    """The forearm's lattice redrawn with smaller modules: `n_rows` rows instead of 5.
+
+    Modules, pads and lattice shrink by 5 / n_rows (pad pitch 10.6 mm · 5 / n_rows), the column
+    count whose pads span the forearm's width most closely, and the slots whose centroid lies in
+    the forearm's bare module stay bare. Same box, taxel density (n_rows / 5)² times as high:
+    parts `forearm_x2` (7 rows, 7.6 mm) and `forearm_x4` (10 rows, 5.3 mm) ask how much the
+    taxel density limits what a network can read from a print (README, "How dense a skin").
+    """
+    big = FOREARM_TILING
+    if n_rows < 1:
+        raise ConfigError(f"finer_forearm_tiling needs n_rows >= 1; got {n_rows}")
+    f = big.n_rows / n_rows
+    col, row = big.col_pitch_mm * f, big.row_pitch_mm * f
+    pitch = big.pitch_mm * f
+    width = np.ptp(big.flat()[0][:, 0])  # flat width of the forearm's pads, mm
+    n_cols = min(
+        range(1, 4 * big.n_cols * n_rows),
+        key=lambda n: abs(np.ptp(Tiling(n_rows, n, col, row, pitch).flat()[0][:, 0]) - width),
+    )
+    centres, up = module_lattice(big.n_rows, big.n_cols, big.col_pitch_mm, big.row_pitch_mm)
+    small, _ = module_lattice(n_rows, n_cols, col, row)
+    bare = np.zeros(len(small), dtype=bool)
+    for (x0, y0), is_up in zip(centres[~big.slots()], up[~big.slots()], strict=True):
+        s = 1.0 if is_up else -1.0  # a down module is an up one turned by 180 degrees
+        h = s * (small[:, 1] - y0)  # height above the centroid, towards the apex
+        half_width = big.col_pitch_mm * (2 / 3 - h / big.row_pitch_mm)  # 0 at the apex
+        bare |= (h >= -big.row_pitch_mm / 3) & (np.abs(small[:, 0] - x0) <= half_width)
+    grid = bare.reshape(n_rows, n_cols)
+    keep = tuple("".join("." if b else "X" for b in r) for r in grid[::-1])
+    return Tiling(n_rows, n_cols, col, row, pitch, keep=keep)
+
+
+
 FOREARM_REGION = TubeRegion((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), center_m=0.16)
 
 # The gripper body: flat faces, 15 mm edge radius; two bands of 7 modules wrap its front and the
@@ -143,6 +177,19 @@ def forearm_8mm() -> Part:
     )
 
 
+def finer_forearm(n_rows: int, name: str) -> Part:
+    """The forearm with `finer_forearm_tiling(n_rows)`: same link and box, denser taxels."""
+    tiling = finer_forearm_tiling(n_rows)
+    return make_part(
+        name,
+        geometry.forearm_mesh(),
+        FOREARM_REGION,
+        tiling,
+        f"procedural Baxter-style upper forearm, {int(tiling.slots().sum())} modules x 12 pads "
+        f"at {tiling.pitch_mm:.1f} mm pitch (denser than the default)",
+    )
+
+
 def end_effector() -> Part:
     """Gripper body (rounded box) with 14 modules over its front and front edges."""
     mesh = geometry.rounded_box_mesh(END_EFFECTOR_SIZE_M, END_EFFECTOR_EDGE_M)
@@ -169,6 +216,8 @@ def plate() -> Part:
 PARTS: dict[str, Callable[[], Part]] = {
     "forearm": forearm,
     "forearm_8mm": forearm_8mm,
+    "forearm_x2": lambda: finer_forearm(7, "forearm_x2"),
+    "forearm_x4": lambda: finer_forearm(10, "forearm_x4"),
     "end_effector": end_effector,
     "plate": plate,
 }

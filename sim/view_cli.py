@@ -159,8 +159,8 @@ def view_command(
     )] = None,
     sample: Annotated[int, typer.Option(help="Sample index in DATASET (count, 0-based).")] = 0,
     part: Annotated[str, typer.Option(
-        help="Built-in part for a simulated sample (name: forearm, forearm_8mm, end_effector, "
-        "plate; no unit).")] = "forearm",
+        help="Built-in part for a simulated sample (name: forearm, forearm_8mm, forearm_x2, "
+        "forearm_x4, end_effector, plate; no unit).")] = "forearm",
     seed: Annotated[int, typer.Option(help="Dataset seed of the simulated sample (integer).")] = 0,
     index: Annotated[int, typer.Option(
         help="Index of the simulated sample (count, 0-based; samples 2, 4, 6, ... are hands "

@@ -1,0 +1,58 @@
+"""Denser forearm skins (`forearm_x2`, `forearm_x4`): the forearm's box, smaller modules."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from sim.parts import FOREARM_TILING, SKIN_PITCH_MM, finer_forearm_tiling, get_part
+from sim.tiling import module_lattice
+from tactile.errors import ConfigError
+from tactile.plot import coverage_mask
+from tactile.tactile_map import TactileMap
+
+ROWS = {"forearm_x2": 7, "forearm_x4": 10}
+
+
+def test_five_rows_is_the_forearm_itself() -> None:
+    """The rule redraws the hand-written forearm tiling, bare slot included, from its own box."""
+    assert finer_forearm_tiling(5) == FOREARM_TILING
+
+
+def bare_centroid_mm() -> np.ndarray:
+    centres, _ = module_lattice(5, 13, FOREARM_TILING.col_pitch_mm, FOREARM_TILING.row_pitch_mm)
+    return centres[~FOREARM_TILING.slots()][0]
+
+
+@pytest.mark.parametrize("name", sorted(ROWS))
+def test_pitch_density_box_and_hole(name: str) -> None:
+    rows = ROWS[name]
+    part = get_part(name)
+    tiling = finer_forearm_tiling(rows)
+    pitch = SKIN_PITCH_MM * 5 / rows
+    # 3D nearest-neighbour distance of the tactile pads (6 and 10 are the iCub's thermal ones):
+    # the scaled pitch (curvature shortens chords a little).
+    pads = part.layout.positions_m[~np.isin(part.layout.channel_ids % 12, (6, 10))] * 1e3
+    d, _ = cKDTree(pads).query(pads, 2)
+    assert np.median(d[:, 1]) == pytest.approx(pitch, rel=0.03)
+    # Same box: the flat pads span the forearm's within 4 % each way.
+    forearm = get_part("forearm")
+    np.testing.assert_allclose(np.ptp(part.flat_mm, 0), np.ptp(forearm.flat_mm, 0), rtol=0.04)
+    # Taxels per covered area of the map: (rows / 5)² times the forearm's, within 6 %.
+    def density(p) -> float:
+        tmap = TactileMap.build(p.layout, step_mm=1.0)
+        return p.n_taxels / (coverage_mask(tmap).sum() * tmap.step_mm**2)
+
+    assert density(part) / density(forearm) == pytest.approx((rows / 5) ** 2, rel=0.06)
+    # The forearm's bare module stays bare: no pad within a pitch of its centroid.
+    hole = bare_centroid_mm()
+    for p in (forearm, part):
+        assert np.min(np.linalg.norm(p.flat_mm - hole, axis=1)) > pitch
+    assert (~tiling.slots()).sum() >= 1
+    assert tiling.slots().sum() * 12 == part.n_taxels
+
+
+def test_finer_forearm_refuses_no_rows() -> None:
+    with pytest.raises(ConfigError, match="n_rows >= 1"):
+        finer_forearm_tiling(0)
