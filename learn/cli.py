@@ -51,6 +51,18 @@ def resolve_run(arch: str, config: Path | None, overrides: dict, test_c: bool):
     return dataclasses.replace(run, **top) if top else run
 
 
+def parse_canvas(text: str) -> tuple[float, float]:
+    """'H,W' (mm) -> (H, W); ConfigError naming the fix when malformed or not positive."""
+    try:
+        h, w = (float(t) for t in text.split(","))
+    except ValueError:
+        h = w = float("nan")
+    if not (h > 0 and w > 0):
+        raise ConfigError(f"--canvas-mm {text!r}: give the canvas as H,W in mm, both > 0, e.g. "
+                          "229,383 (the forearm map)")
+    return h, w
+
+
 def _check_data(data: Path) -> None:
     from learn.folder import is_dataset
 
@@ -98,6 +110,9 @@ InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file); vgg_svm:
                "checkpoint whose features feed the SVM.")
 TestCOpt = _opt(bool, "The paper's Test C schedule: lr 0.01 halved at epoch 60 of 120, batch 128 "
                 "images, lr x 0.1 on the first two convolutions.")
+CanvasOpt = _opt(str | None, "Input canvas 'H,W' in mm (e.g. 229,383, the forearm map): each "
+                 "map centred on it (zero-padded or cropped) before the resize, so a mm is the "
+                 "same number of input pixels on any part. Default: stretch each map (paper).")
 ResumeOpt = _opt(bool, "Continue from OUT/last.pt.")
 StopOpt = _opt(int | None, "Stop once this epoch (1-based, counted from the run's start) is "
                "done, keeping the schedule of all the epochs, to split a long run; no test "
@@ -122,6 +137,7 @@ def train_command(
     hand_classes: HandOpt = None,
     init: InitOpt = None,
     test_c: TestCOpt = False,
+    canvas_mm: CanvasOpt = None,
     resume: ResumeOpt = False,
     stop_after_epoch: StopOpt = None,
     cv_grid: GridOpt = None,
@@ -138,13 +154,17 @@ def train_command(
             unused = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction,
                       "--precision": precision, "--test-c": test_c or None,
                       "--resume": resume or None, "--cv-grid": cv_grid,
-                      "--stop-after-epoch": stop_after_epoch}  # fmt: skip
+                      "--stop-after-epoch": stop_after_epoch,
+                      "--canvas-mm": canvas_mm}  # fmt: skip
             _train_classical(arch, data, out, config, seed, _hand_classes(hand_classes), init,
                              epochs, unused, progress)  # fmt: skip
             return
         over = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "seed": seed,
                 "val_fraction": val_fraction, "precision": precision}  # fmt: skip
         run = resolve_run(arch, config, over, test_c)
+        if canvas_mm is not None:
+            model = dataclasses.replace(run.model, canvas_mm=parse_canvas(canvas_mm))
+            run = dataclasses.replace(run, model=model)
         _train(run, data, out, _hand_classes(hand_classes), init, resume, stop_after_epoch,
                cv_grid, cv_folds, progress)  # fmt: skip
     except (HandskinError, KeyError) as err:
@@ -277,102 +297,6 @@ def _ensemble_jobs(by_task: dict[str, list[Path]], tta: bool) -> list[tuple[list
     return [(paths, t) for paths in groups for t in ((False, True) if tta else (False,))]
 
 
-ImageOpt = _opt(Path | None, "A tactile image file (grey PNG/JPG, any size in pixels; taken "
-                "as 1 mm per pixel by a model with an input canvas).")
-FrameOpt = _opt(Path | None, "A taxel frame (.csv row or .npy) of N taxel or C channel values.")
-MapOpt = _opt(Path | None, "For --frame: a dataset folder (its map; values are raw counts, "
-              "converted to Pa) or a layout file (values taken as Pa).", "--map")
-PredDataOpt = _opt(Path | None, "A dataset folder: predict its sample --index (the stored "
-                   "image; raw counts converted to Pa; the ground truth shown when stored).")
-IndexOpt = _opt(int | None, "Sample of --data (count, 0-based).")
-ClfOpt = Annotated[list[Path] | None, typer.Option(metavar="<path>", help=(
-    "Classifier checkpoint (.pt file); give it again to average several networks' softmax (an "
-    "ensemble, about the sum of their times)."))]
-SegOpt = Annotated[list[Path] | None, typer.Option(metavar="<path>", help=(
-    "Segmenter checkpoint (.pt file); give it again to average several networks' softmax (an "
-    "ensemble, about the sum of their times)."))]
-PngOpt = _opt(Path | None, "Write the Figs. 12-13 figure here (PNG, 90 dpi: image, truth when "
-              "known, prediction, errors in red) and Fig. 18's per-part bars (kPa, taxel "
-              "count) beside it as <stem>_parts.png.")
-LabelsOpt = _opt(Path | None, "Write the per-taxel predicted class ids here (.npy, (N,) uint8 "
-                 "0..6, no unit) for: handskin view DATASET --sample I --color prediction "
-                 "--pred FILE.npy.")
-StepOpt = _opt(float, "Grid step of the map built from a layout file, mm/pixel.")
-ThresholdOpt = _opt(float | None, "Per-part counts and means take taxels above this pressure, "
-                    "Pa (default: the dataset's active-taxel threshold for --data, else 0).")
-PredTtaOpt = _opt(bool, "Test-time flips: each network's mean softmax over the views it was "
-                  "trained on (original, columns and rows reversed); about 3x the time.", "--tta")
-
-
-def predict_command(
-    image: ImageOpt = None,
-    frame: FrameOpt = None,
-    map_: MapOpt = None,
-    data: PredDataOpt = None,
-    index: IndexOpt = None,
-    classifier: ClfOpt = None,
-    segmenter: SegOpt = None,
-    png: PngOpt = None,
-    save_labels: LabelsOpt = None,
-    step_mm: StepOpt = 1.0,
-    threshold_pa: ThresholdOpt = None,
-    tta: PredTtaOpt = False,
-) -> None:
-    """Class + probability, segmentation, per-taxel labels, per-part taxels and mean pressure.
-
-    Figs. 12-13 and 18 pictures with --png; labels for handskin view with --save-labels."""
-    import numpy as np
-
-    from learn import predict as P
-
-    try:
-        P.check_inputs(image, frame, map_, data, index, classifier, segmenter, save_labels)
-        if threshold_pa is not None and not threshold_pa >= 0:
-            raise ConfigError(f"--threshold-pa {threshold_pa}: give a pressure >= 0 Pa")
-        sample = None if data is None else P.read_sample(data, index)
-        if sample is not None and threshold_pa is not None:
-            sample = dataclasses.replace(sample, threshold_pa=threshold_pa)
-        clf = _predictor(P, classifier, tta)
-        seg = _predictor(P, segmenter, tta)
-        pred = _predict(P, image, frame, map_, sample, clf, seg, step_mm, threshold_pa or 0.0)
-    except (HandskinError, KeyError) as err:
-        raise _fail(err) from err
-    _echo_prediction(pred)
-    if save_labels is not None:
-        save_labels.parent.mkdir(parents=True, exist_ok=True)
-        np.save(save_labels, pred.taxel_labels.astype(np.uint8))
-        typer.echo(f"per-taxel labels written to {save_labels}")
-    if png is not None:
-        folders = " + ".join(p.parent.name or "model" for p in segmenter or ())
-        name = "predicted" if seg is None else f"predicted ({folders})"
-        for path in P.save_figures(pred, png, name):
-            typer.echo(f"picture written to {path}")
-
-
-def _predictor(P, paths: list[Path] | None, tta: bool):
-    """None, one network, or the mean softmax of several (``--segmenter`` given twice)."""
-    if not paths:
-        return None
-    return P.load_predictor(paths[0] if len(paths) == 1 else paths, tta)
-
-
-def _predict(P, image, frame, map_, sample, clf, seg, step_mm, threshold_pa):
-    if sample is not None:
-        return P.predict_sample(sample, clf, seg)
-    if image is not None:
-        return P.predict_image(P.load_image(image), clf, seg)
-    tmap, layout, to_pa = P.load_map(map_, step_mm)
-    return P.predict_frame(to_pa(P.read_frame(frame, layout)), tmap, clf, seg, threshold_pa)
-
-
-def _echo_prediction(pred) -> None:
-    if pred.class_name is not None:
-        typer.echo(f"class {pred.class_name} (probability {pred.probability:.4f})")
-    if pred.parts is not None:
-        for name, s in pred.parts.items():
-            typer.echo(f"{name:7s} {s.n_taxels:5d} taxels, mean pressure {s.mean_pressure:.4g}")
-
-
 def _needs_torch(command):
     """``command`` preceded by a clear error when PyTorch is not installed (it is an extra)."""
 
@@ -395,4 +319,6 @@ def register(app: typer.Typer) -> None:
     """Add `train`, `evaluate` and `predict` to the `handskin` app."""
     app.command("train")(_needs_torch(train_command))
     app.command("evaluate")(_needs_torch(evaluate_command))
+    from learn.predict_cli import predict_command
+
     app.command("predict")(_needs_torch(predict_command))

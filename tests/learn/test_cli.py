@@ -80,6 +80,17 @@ def test_train_in_parts_equals_one_run(app, tiny_dataset, small_config, tmp_path
     assert [h["train_loss"] for h in ha] == [h["train_loss"] for h in hb] and len(hb) == 2
 
 
+def test_canvas_option_reaches_the_checkpoint(app, tiny_dataset, small_config, tmp_path):
+    """``--canvas-mm H,W`` sets the model's input canvas (the run TOML's ``[model] canvas_mm``)."""
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["train", str(tiny_dataset), "--out", str(out), "--config",
+                              str(small_config), "--no-progress", "--epochs", "1",
+                              "--canvas-mm", "60,150.5"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert load_checkpoint(out / "best.pt")["config"]["model"]["canvas_mm"] == [60.0, 150.5]
+    assert "canvas_mm = [60.0, 150.5]" in (out / "run.toml").read_text()
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
@@ -100,6 +111,10 @@ def test_train_in_parts_equals_one_run(app, tiny_dataset, small_config, tmp_path
          "--stop-after-epoch does not apply"),
         (["train", "{data}", "--out", "{out}", "--stop-after-epoch", "1", "--cv-grid",
           "train.lr=0.1,0.01"], "--stop-after-epoch with --cv-grid"),
+        (["train", "{data}", "--out", "{out}", "--canvas-mm", "229"], "give the canvas as H,W"),
+        (["train", "{data}", "--out", "{out}", "--canvas-mm", "0,383"], "both > 0"),
+        (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--canvas-mm", "229,383"],
+         "--canvas-mm does not apply"),
     ],
 )
 def test_errors_before_work(app, tiny_dataset, tmp_path, args, message):
