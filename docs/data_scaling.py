@@ -1,7 +1,9 @@
-"""Test score against the number of training samples, from `handskin evaluate` reports.
+"""Test score against the number of training samples (or the skin's taxel density), from
+`handskin evaluate` reports.
 
     python docs/data_scaling.py reports/learning.json reports/learning-3x.json \
         reports/learning-hands9k.json --png docs/data_scaling.png
+    python docs/data_scaling.py reports/density-*.json --x density --png docs/taxel_density.png
 
 Every row of the given report JSON files (``handskin evaluate --report X.md`` writes ``X.json``)
 but ensembles (``--ensemble``) becomes a point: accuracy (classifiers) or mean IoU
@@ -10,6 +12,9 @@ but ensembles (``--ensemble``) becomes a point: accuracy (classifiers) or mean I
 the paper's published score as a dashed line. Each report scores its models on its own
 dataset's held-out test split, so points of different datasets come from different test
 subjects; a row whose scores are not held out (``shared_with_training``) is refused.
+With ``--x density`` the x axis is the taxel density of each row's training dataset (taxels
+per cm² of the tactile map's covered area, read from the dataset, which must be at the path
+the checkpoint records).
 """
 
 from __future__ import annotations
@@ -27,14 +32,33 @@ import matplotlib.pyplot as plt
 
 from learn.experiments import paper
 from learn.row_labels import TTA_SUFFIX, method_label, trained_precision, width_label
+from tactile.dataset import open_dataset
+from tactile.plot import coverage_mask
 
 PAPER = {"HandsNet": paper.HANDSNET_ACCURACY_PCT, "SegNet": paper.SEGNET_MIOU_PCT}
 TASKS = (("classify", "accuracy", "test accuracy, %", "hand / non-hand"),
          ("segment", "mean_iou", "test mean IoU, %", "hand parts (7 classes)"))  # fmt: skip
 
 
-def points(paths: list[Path]) -> dict[str, dict[str, list[tuple[int, float, str]]]]:
-    """{task: {method: [(train samples, score %, dataset name), ...]}} of the reports' rows."""
+XLABEL = {"train": "training samples (count, log scale; segmenters: hand images)",
+          "density": "taxels per cm² of covered skin (log scale)"}  # fmt: skip
+
+
+def taxel_density_per_cm2(data_dir: Path) -> float:
+    """Taxels of a dataset's part per cm² of its tactile map's covered area."""
+    if not (data_dir / "dataset.h5").is_file():
+        raise SystemExit(f"--x density needs the training dataset at {data_dir} (dataset.h5 "
+                         "missing); regenerate it there or score models whose data is present")
+    with open_dataset(data_dir) as ds:
+        tmap = ds.map
+        return ds.layout.n_taxels / (coverage_mask(tmap).sum() * tmap.step_mm**2 / 100.0)
+
+
+def points(
+    paths: list[Path], x: str = "train"
+) -> dict[str, dict[str, list[tuple[float, float, str]]]]:
+    """{task: {method: [(x, score %, dataset name), ...]}} of the reports' rows; x is the
+    training samples (``x="train"``) or the taxel density per cm² (``x="density"``)."""
     out: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
     for path in paths:
         for row in json.loads(path.read_text()):
@@ -48,8 +72,10 @@ def points(paths: list[Path]) -> dict[str, dict[str, list[tuple[int, float, str]
             if data.get("n_train") is None:
                 raise SystemExit(f"{path}: {row['checkpoint']} does not record its training data")
             key = {task: metric for task, metric, _, _ in TASKS}[row["task"]]
+            where = (int(data["n_train"]) if x == "train"
+                     else taxel_density_per_cm2(Path(data["path"])))  # fmt: skip
             out[row["task"]][method_of(row)].append(
-                (int(data["n_train"]), 100 * row["metrics"][key], Path(data["path"]).name))
+                (where, 100 * row["metrics"][key], Path(data["path"]).name))
     return out
 
 
@@ -63,8 +89,9 @@ def method_of(row: dict) -> str:
         bf16 + (TTA_SUFFIX if row.get("tta_views") else ""))  # fmt: skip
 
 
-def chart(pts: dict, png: Path) -> Path:
-    """Two panels (classification, segmentation), score against training samples."""
+def chart(pts: dict, png: Path, x: str = "train") -> Path:
+    """Two panels (classification, segmentation), score against training samples (or taxel
+    density, ``x="density"``)."""
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
     for ax, (task, _, ylabel, title) in zip(axes, TASKS, strict=True):
         drawn = set()  # methods whose paper line is drawn
@@ -87,16 +114,16 @@ def chart(pts: dict, png: Path) -> Path:
         ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         lo, hi = ax.get_xlim()
-        ax.set_xticks([t for t in (500, 1000, 2000, 3000, 5000, 10000, 20000, 50000)
-                       if lo <= t <= hi])  # fmt: skip
+        ticks = (500, 1000, 2000, 3000, 5000, 10000, 20000, 50000) if x == "train" else ns
+        ax.set_xticks(sorted({round(t, 2) for t in ticks if lo <= t <= hi}))
         ax.margins(y=0.12)
         _label_points(ax, labels)
-        ax.set(xlabel="training samples (count, log scale; segmenters: hand images)",
-               ylabel=ylabel, title=title)  # fmt: skip
+        ax.set(xlabel=XLABEL[x], ylabel=ylabel, title=title)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="lower right" if task == "classify" else "upper left")
-    fig.suptitle("More synthetic data: test score against training set size (each point on its "
-                 "own dataset's held-out subjects)", fontsize=10)  # fmt: skip
+    what = ("More synthetic data: test score against training set size" if x == "train" else
+            "Denser skin: test score against taxel density")  # fmt: skip
+    fig.suptitle(f"{what} (each point on its own dataset's held-out subjects)", fontsize=10)
     fig.tight_layout()
     fig.savefig(png, dpi=110)
     return png
@@ -112,7 +139,7 @@ def spread(ys: list[float], gap: float) -> list[float]:
     return out
 
 
-def _label_points(ax, labels: list[tuple[int, float, str, str]]) -> None:
+def _label_points(ax, labels: list[tuple[float, float, str, str]]) -> None:
     """Write each point's score right of it; labels of points at one x are spread apart so they
     do not overlap (a thin line joins a moved label to its point)."""
     lo, hi = ax.get_ylim()
@@ -135,13 +162,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("reports", nargs="+", type=Path, help="report JSON files of handskin evaluate")
     ap.add_argument("--png", type=Path, required=True, help="chart to write (PNG path)")
+    ap.add_argument("--x", choices=sorted(XLABEL), default="train",
+                    help="x axis: training samples (count) or the skin's taxels per cm²")
     args = ap.parse_args()
-    pts = points(args.reports)
+    pts = points(args.reports, args.x)
+    unit = " train" if args.x == "train" else " taxels/cm²"
     for task, methods in pts.items():
         for method, rows in sorted(methods.items()):
-            text = ", ".join(f"{n} train: {s:.2f} % ({d})" for n, s, d in sorted(rows))
+            text = ", ".join(f"{n:g}{unit}: {s:.2f} % ({d})" for n, s, d in sorted(rows))
             print(task, method, text)
-    print(f"chart written to {chart(pts, args.png)}")
+    print(f"chart written to {chart(pts, args.png, args.x)}")
 
 
 if __name__ == "__main__":
