@@ -3,7 +3,7 @@
 
     python docs/data_scaling.py reports/learning.json reports/learning-3x.json \
         reports/learning-hands9k.json --png docs/data_scaling.png
-    python docs/data_scaling.py reports/density-*.json --x density --png docs/taxel_density.png
+    python docs/data_scaling.py reports/density/*.json --x density --png docs/taxel_density.png
 
 Every row of the given report JSON files (``handskin evaluate --report X.md`` writes ``X.json``)
 but ensembles (``--ensemble``) becomes a point: accuracy (classifiers) or mean IoU
@@ -11,10 +11,13 @@ but ensembles (``--ensemble``) becomes a point: accuracy (classifiers) or mean I
 (``train_data.n_train``), one line per method and width (dotted with test-time flips), with
 the paper's published score as a dashed line. Each report scores its models on its own
 dataset's held-out test split, so points of different datasets come from different test
-subjects; a row whose scores are not held out (``shared_with_training``) is refused.
+subjects: the bars are the reports' 95 % intervals with test subjects and object instances
+redrawn (`learn.cluster_bootstrap`; none for a row that records no groups). A row whose scores
+are not held out (``shared_with_training``) is refused.
 With ``--x density`` the x axis is the taxel density of each row's training dataset (taxels
 per cm² of the tactile map's covered area, read from the dataset, which must be at the path
-the checkpoint records).
+the checkpoint records), and skins that cover a different share of their map (to the nearest
+10 %) get lines of their own.
 """
 
 from __future__ import annotations
@@ -26,10 +29,12 @@ from pathlib import Path
 
 import matplotlib
 import matplotlib.ticker
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from learn.cluster_bootstrap import grouped_accuracy_interval
 from learn.experiments import paper
 from learn.row_labels import TTA_SUFFIX, method_label, trained_precision, width_label
 from tactile.dataset import open_dataset
@@ -44,21 +49,36 @@ XLABEL = {"train": "training samples (count, log scale; segmenters: hand images)
           "density": "taxels per cm² of covered skin (log scale)"}  # fmt: skip
 
 
-def taxel_density_per_cm2(data_dir: Path) -> float:
-    """Taxels of a dataset's part per cm² of its tactile map's covered area."""
+def skin_density(data_dir: Path) -> tuple[float, float]:
+    """(taxels per cm² of the tactile map's covered area, covered share of the map in %) of a
+    dataset's part."""
     if not (data_dir / "dataset.h5").is_file():
         raise SystemExit(f"--x density needs the training dataset at {data_dir} (dataset.h5 "
                          "missing); regenerate it there or score models whose data is present")
     with open_dataset(data_dir) as ds:
-        tmap = ds.map
-        return ds.layout.n_taxels / (coverage_mask(tmap).sum() * tmap.step_mm**2 / 100.0)
+        covered = coverage_mask(ds.map)
+        per_cm2 = ds.layout.n_taxels / (covered.sum() * ds.map.step_mm**2 / 100.0)
+        return per_cm2, 100.0 * covered.mean()
 
 
-def points(
-    paths: list[Path], x: str = "train"
-) -> dict[str, dict[str, list[tuple[float, float, str]]]]:
-    """{task: {method: [(x, score %, dataset name), ...]}} of the reports' rows; x is the
-    training samples (``x="train"``) or the taxel density per cm² (``x="density"``)."""
+def interval_pct(row: dict) -> tuple[float, float] | None:
+    """The row's 95 % interval (lo, hi) in % with test subjects and instances redrawn, or None
+    when the row records no groups."""
+    if row["task"] == "segment":
+        lo_hi = row.get("mean_iou_interval_groups")
+    elif row.get("test_groups") is not None and row.get("errors") is not None:
+        wrong = [e["index"] for e in row["errors"]]
+        right = ~np.isin(np.asarray(row["test_indices"]), wrong)
+        lo_hi = grouped_accuracy_interval(right, row["test_groups"])
+    else:
+        lo_hi = None
+    return None if lo_hi is None else (100 * lo_hi[0], 100 * lo_hi[1])
+
+
+def points(paths: list[Path], x: str = "train") -> dict[str, dict[str, list[tuple]]]:
+    """{task: {line: [(x, score %, dataset name, interval % or None), ...]}} of the reports'
+    rows; x is the training samples (``x="train"``) or the taxel density per cm²
+    (``x="density"``, lines also split by covered share)."""
     out: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
     for path in paths:
         for row in json.loads(path.read_text()):
@@ -72,10 +92,14 @@ def points(
             if data.get("n_train") is None:
                 raise SystemExit(f"{path}: {row['checkpoint']} does not record its training data")
             key = {task: metric for task, metric, _, _ in TASKS}[row["task"]]
-            where = (int(data["n_train"]) if x == "train"
-                     else taxel_density_per_cm2(Path(data["path"])))  # fmt: skip
-            out[row["task"]][method_of(row)].append(
-                (where, 100 * row["metrics"][key], Path(data["path"]).name))
+            line = method_of(row)
+            if x == "train":
+                where = int(data["n_train"])
+            else:
+                where, covered = skin_density(Path(data["path"]))
+                line += f", {10 * round(covered / 10):.0f} % covered"
+            out[row["task"]][line].append(
+                (where, 100 * row["metrics"][key], Path(data["path"]).name, interval_pct(row)))
     return out
 
 
@@ -97,12 +121,16 @@ def chart(pts: dict, png: Path, x: str = "train") -> Path:
         drawn = set()  # methods whose paper line is drawn
         labels = []  # (train samples, score %, text, colour) of every point
         for method, rows in sorted(pts.get(task, {}).items()):
-            rows = sorted(rows)
-            style = "o:" if method.endswith(TTA_SUFFIX) else "o-"
+            rows = sorted(rows, key=lambda r: r[:3])
+            style = "o:" if method.split(",")[0].endswith(TTA_SUFFIX) else "o-"
             line = ax.plot([r[0] for r in rows], [r[1] for r in rows], style, label=method)[0]
+            for n, score, _, span in rows:
+                if span is not None:
+                    ax.errorbar(n, score, yerr=[[score - span[0]], [span[1] - score]],
+                                color=line.get_color(), capsize=3, lw=1)  # fmt: skip
             labels += [(n, score, f"{score:.1f} ({name})", line.get_color())
-                       for n, score, name in rows]  # fmt: skip
-            base = method.split(" ")[0]
+                       for n, score, name, _ in rows]  # fmt: skip
+            base = method.split(" ")[0].rstrip(",")
             if base in PAPER and base not in drawn:
                 drawn.add(base)
                 ax.axhline(PAPER[base], ls="--", color=line.get_color(), lw=1,
@@ -158,6 +186,10 @@ def _label_points(ax, labels: list[tuple[float, float, str, str]]) -> None:
     ax.set_ylim(lowest, hi)
 
 
+def _span(interval: tuple[float, float] | None) -> str:
+    return "" if interval is None else f"; {interval[0]:.2f}–{interval[1]:.2f} % subjects redrawn"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("reports", nargs="+", type=Path, help="report JSON files of handskin evaluate")
@@ -169,7 +201,8 @@ def main() -> None:
     unit = " train" if args.x == "train" else " taxels/cm²"
     for task, methods in pts.items():
         for method, rows in sorted(methods.items()):
-            text = ", ".join(f"{n:g}{unit}: {s:.2f} % ({d})" for n, s, d in sorted(rows))
+            text = ", ".join(f"{n:g}{unit}: {s:.2f} % ({d}{_span(i)})"
+                             for n, s, d, i in sorted(rows, key=lambda r: r[:3]))
             print(task, method, text)
     print(f"chart written to {chart(pts, args.png, args.x)}")
 
