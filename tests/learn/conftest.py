@@ -61,15 +61,29 @@ def make_sample(i: int, tmap: TactileMap, flat_mm: np.ndarray) -> dict:
     }  # fmt: skip
 
 
-def write_tiny_dataset(folder, samples: list[int], drop: tuple[str, ...] = ()):
+def as_object(row: dict) -> dict:
+    """A hand row recorded as an object touch (label noise): not a hand, no subject, no part
+    labels, instance 100 + subject."""
+    if not row["is_hand"]:
+        return row
+    instance = np.int32(100 + row["subject_id"])
+    return {**row, "is_hand": np.uint8(0), "subject_id": np.int32(-1), "instance_id": instance,
+            "taxel_label": np.zeros_like(row["taxel_label"]),
+            "label_image": np.zeros_like(row["label_image"])}  # fmt: skip
+
+
+def write_tiny_dataset(folder, samples: list[int], drop: tuple[str, ...] = (),
+                       hands_as_objects: bool = False):  # fmt: skip
     """Write samples ``samples`` (`make_sample` numbering) of the tiny set to ``folder``,
-    without the fields ``drop``; returns the folder."""
+    without the fields ``drop``, the hands recorded as objects if ``hands_as_objects``;
+    returns the folder."""
     layout, flat_mm = cylinder_sector_layout(width_mm=60, length_mm=90, pitch_mm=5)
     tmap = TactileMap.build(layout)
     writer = DatasetWriter(folder, config={"test": "tiny"}, part="sector", generator_version="t",
                            seed=3, tmap=tmap, layout=layout,
                            attrs={"skin_counts_per_pa": GAIN})  # fmt: skip
     rows = [make_sample(i, tmap, flat_mm) for i in samples]
+    rows = [as_object(r) for r in rows] if hands_as_objects else rows
     writer.write_chunk(0, [{k: v for k, v in r.items() if k not in drop} for r in rows])
     writer.merge()
     return folder
@@ -77,7 +91,8 @@ def write_tiny_dataset(folder, samples: list[int], drop: tuple[str, ...] = ()):
 
 @pytest.fixture(scope="session")
 def tiny_writer():
-    """`write_tiny_dataset(folder, samples, drop=())`: a few tiny samples, some fields left out."""
+    """`write_tiny_dataset(folder, samples, drop=(), hands_as_objects=False)`: a few tiny
+    samples, some fields left out, hands perhaps mislabelled as objects."""
     return write_tiny_dataset
 
 

@@ -174,7 +174,8 @@ def vgg16_checkpoint(tiny_dataset, tiny_run, tmp_path_factory):
     return folder / "best.pt"
 
 
-def test_vgg_svm_train_save_load_evaluate(vgg16_checkpoint, checkpoints, tiny_dataset, tmp_path):
+def test_vgg_svm_train_save_load_evaluate(vgg16_checkpoint, checkpoints, tiny_dataset, tiny_writer,
+                                          tmp_path):  # fmt: skip
     out = tmp_path / "vgg_svm"
     report = train_classical("vgg_svm", tiny_dataset, out, seed=1, init=vgg16_checkpoint,
                              progress=False)  # fmt: skip
@@ -195,17 +196,21 @@ def test_vgg_svm_train_save_load_evaluate(vgg16_checkpoint, checkpoints, tiny_da
     assert f"| VGG16 + SVM | {acc:.2f} | {row['ms_per_image']['fast']:.2f} | unknown |" in text
     assert "| HandsNet | " in text and "| BoVW | not run |" in text
     assert json.loads((out / "test_metrics.json").read_text())["seed"] == 1
-    # errors ranked by the SVM's own margin |score|, and the tables by contact size and contactor
-    *_, indices = split_images(tiny_dataset, "test", (32, 48), return_indices=True)
+    # errors ranked by the SVM's own margin |score|, and the tables by contact size and contactor;
+    # on a copy of the data whose hands are recorded as objects, the better the SVM, the more
+    # errors it leaves to rank
+    mislabelled = tiny_writer(tmp_path / "mislabelled", list(range(48)), hands_as_objects=True)
+    row = evaluate_classical(out / MODEL_FILE, mislabelled, time_runs=3)
+    x, y, _, indices = split_images(mislabelled, "test", (32, 48), return_indices=True)
     score, pred = fresh.decision_function(x), fresh.predict(x)
     wrong = sorted(np.flatnonzero(pred != y), key=lambda k: -abs(score[k]))
-    assert len(wrong) > 1, "the one-epoch features should leave the SVM some errors to rank"
+    assert len(wrong) > 1, "the hands recorded as objects should leave the SVM errors to rank"
     assert [e["index"] for e in row["errors"]] == [int(indices[k]) for k in wrong]
     np.testing.assert_allclose([e["margin"] for e in row["errors"]],
                                [abs(score[k]) for k in wrong], rtol=1e-6)  # fmt: skip
     assert sum(b["n"] for b in row["by_contactor"]) == len(y)
     assert sum(b["n"] for b in row["by_active_taxels"]) == len(y)
-    (sheet,) = save_error_sheets([row], tiny_dataset, tmp_path / "svm.md")
+    (sheet,) = save_error_sheets([row], mislabelled, tmp_path / "svm.md")
     assert sheet.name == "svm_errors_VGG16_SVM.png" and sheet.read_bytes()[:4] == b"\x89PNG"
     assert "SVM margin" in write_report([row], tmp_path / "svm.md").read_text()
 

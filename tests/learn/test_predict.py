@@ -138,10 +138,12 @@ def test_ground_truth_segmentation_backprojects_to_the_dataset_labels(tiny_datas
         assert np.array_equal(active, sample.true_labels > 0)  # hand samples: pressed = labelled
         assert (pred.taxel_labels[active] > 0).all()  # every pressed taxel lies under the image
         # the label image gives a pixel the part with the largest pressure there, so a finger
-        # taxel beside the (harder pressed) palm may be read as palm; all others agree
+        # taxel beside the (harder pressed) palm may be read as palm, and one beside the next
+        # finger (pressed equally hard; ties go to the smaller id) as that finger; none else
         agree = pred.taxel_labels[active] == sample.true_labels[active]
         assert agree.mean() >= 0.95
-        assert set(pred.taxel_labels[active][~agree]) <= {6}
+        read, true = pred.taxel_labels[active][~agree], sample.true_labels[active][~agree]
+        assert ((read == 6) | ((np.abs(read.astype(int) - true) == 1) & (read < 6))).all()
 
 
 def test_read_sample_errors(tiny_dataset, tmp_path):
