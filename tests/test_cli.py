@@ -39,3 +39,26 @@ def test_map_reports_a_bad_layout_and_exits_2(tmp_path: Path):
     result = runner.invoke(app, ["map", str(bad)])
     assert result.exit_code == 2
     assert "units" in result.output
+
+
+@pytest.mark.parametrize(
+    ("command", "option"),
+    [("part", None), ("generate", "--part"), ("view", "--part"), ("experiment", "--part")],
+)
+def test_part_help_names_every_built_in_part(command: str, option: str | None):
+    """The part lists in help texts are typed out (importing sim.parts would slow --help); they
+    must name every part the registry builds."""
+    import re
+
+    import typer.main
+
+    from sim.parts import PARTS
+
+    group = typer.main.get_command(app)
+    cmd = group.commands[command]  # type: ignore[attr-defined]
+    if command == "experiment":
+        cmd = cmd.commands["fidelity"]
+    (param,) = [p for p in cmd.params if (option in p.opts if option else p.name == "name")]
+    text = " ".join(param.help.split())
+    missing = sorted(set(PARTS) - set(re.findall(r"\w+", text)))
+    assert not missing, f"{command} help lacks parts {missing}: {text!r}"
