@@ -2,7 +2,8 @@
 
     python benchmarks/bench_models.py [--runs 50] [--widths 1.0 0.5] [--size 68 100]
 
-Prints, for each registered model at its default width (and any extra ``--widths``), the
+Prints, for each registered model at its default width, its `handskin train` preset's width
+(`learn.config`: 0.25 for VGG16, SegNet and FCN-16s) and any extra ``--widths``, the
 parameter count and the median ms / image with 1 and 2 CPU threads, as built (eval mode) and
 after ``prepare_for_inference`` (batch norm folded, channels-last), against the targets of the
 learning issue (HandsNet ≤ 3 ms, SegNet ≤ 60 ms per image on one CPU core, judged on the
@@ -19,12 +20,17 @@ import inspect
 
 import torch
 
+from learn import config as C
 from learn.ensemble import MeanSoftmax
 from learn.metrics import time_per_image
 from learn.models import MODELS, count_parameters, create_model, prepare_for_inference
 from learn.tta import PAPER_VIEWS, FlipTTA
 
 TARGET_MS_ONE_CORE = {"handsnet": 3.0, "segnet": 60.0}  # from the learning issue
+
+
+PRESET_WIDTH = {run.model.arch: run.model.width for run in (C.HANDSNET, C.VGG16_FINETUNE, C.SEGNET,
+                                                             C.FCN16S)}  # fmt: skip
 
 
 def default_width(arch: str) -> float | None:
@@ -88,7 +94,9 @@ def main() -> None:
         f"{h:>9s}" for h in ("built 1", "built 2", "prep 1", "prep 2")))
     for arch in MODELS:
         widths = [default_width(arch)]
-        widths += [] if widths[0] is None else [w for w in args.widths if w != widths[0]]
+        if widths[0] is not None:
+            extra = [PRESET_WIDTH.get(arch), *args.widths]
+            widths += sorted({w for w in extra if w is not None} - set(widths), reverse=True)
         for width in widths:
             print(bench_one(arch, width, size, args.runs), flush=True)
     print("ensemble of the CPU segmenter presets, ms / image:")
