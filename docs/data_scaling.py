@@ -113,6 +113,16 @@ def method_of(row: dict) -> str:
         bf16 + (TTA_SUFFIX if row.get("tta_views") else ""))  # fmt: skip
 
 
+def _spread(ticks: list[float], ratio: float = 1.2) -> list[float]:
+    """Ascending ``ticks`` without those closer than ``ratio`` to the last kept one (log axis:
+    their labels would overlap)."""
+    kept: list[float] = []
+    for t in ticks:
+        if not kept or t >= kept[-1] * ratio:
+            kept.append(t)
+    return kept
+
+
 def chart(pts: dict, png: Path, x: str = "train") -> Path:
     """Two panels (classification, segmentation), score against training samples (or taxel
     density, ``x="density"``)."""
@@ -143,7 +153,7 @@ def chart(pts: dict, png: Path, x: str = "train") -> Path:
         ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         lo, hi = ax.get_xlim()
         ticks = (500, 1000, 2000, 3000, 5000, 10000, 20000, 50000) if x == "train" else ns
-        ax.set_xticks(sorted({round(t, 2) for t in ticks if lo <= t <= hi}))
+        ax.set_xticks(_spread(sorted({round(t, 2) for t in ticks if lo <= t <= hi})))
         ax.margins(y=0.12)
         _label_points(ax, labels)
         ax.set(xlabel=XLABEL[x], ylabel=ylabel, title=title)
