@@ -23,6 +23,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from common_test_samples import press_keys  # docs/, beside this script
 
 from learn.metrics import confusion_matrix, segmentation_scores
 from learn.predict import load_predictor, segment
@@ -32,13 +33,13 @@ from tactile.labels import CLASS_NAMES, PALETTE
 MARGIN_PX = 15  # crop margin around the print, map pixels (1 mm)
 
 
-def press_table(data: Path) -> tuple[np.ndarray, set[int]]:
-    """(S, 3) int64 (episode seed, subject id, is_hand) of every sample, and the test indices."""
+def press_table(data: Path) -> tuple[np.ndarray, np.ndarray, set[int]]:
+    """(S, 2) int64 press keys (`common_test_samples.press_keys`: what makes two samples the
+    same press), (S,) bool is-hand, and the test indices."""
     with open_dataset(data) as ds:
-        s = ds.file["samples"]
-        keys = np.column_stack([np.asarray(s[k][:]).astype(np.int64)
-                                for k in ("episode_seed", "subject_id", "is_hand")])  # fmt: skip
-        return keys, {int(i) for i in ds.file["splits/test"][:]}
+        hand = np.asarray(ds.file["samples/is_hand"][:]).astype(bool)
+        test = {int(i) for i in ds.file["splits/test"][:]}
+    return press_keys(data), hand, test
 
 
 def common_hands(datasets: list[Path], n: int, seed: int) -> list[int]:
@@ -47,8 +48,8 @@ def common_hands(datasets: list[Path], n: int, seed: int) -> list[int]:
     tables = [press_table(d) for d in datasets]
     size = min(len(t[0]) for t in tables)
     first = tables[0][0][:size]
-    ok = (first[:, 2] == 1) & np.all([t[0][:size] == first for t in tables], axis=(0, 2))
-    both = np.flatnonzero(ok & np.array([all(i in t[1] for t in tables) for i in range(size)]))
+    ok = tables[0][1][:size] & np.all([t[0][:size] == first for t in tables], axis=(0, 2))
+    both = np.flatnonzero(ok & np.array([all(i in t[2] for t in tables) for i in range(size)]))
     if len(both) < n:
         raise SystemExit(f"only {len(both)} test hands are common to all datasets; ask for fewer")
     return sorted(np.random.default_rng(seed).choice(both, n, replace=False).tolist())
