@@ -1,9 +1,13 @@
 """Held-out or not: a model scored on another dataset than the one it was trained on.
 
-Two handskin datasets generated with one seed draw their subjects and object instances from one
-pool (``s0000``.. for any ``n``), but each splits them its own way (the greedy 70/30 split
-balances sample counts, which depend on ``n``). A model trained on one and tested on the other
-can therefore be tested on people it was trained on. :func:`shared_groups` finds them.
+Two handskin datasets generated with one seed draw their subjects from one pool (``s0000``.. for
+any ``n`` and any part: a subject's hand depends on the seed and its id only), and the
+generator's object and body-part instances depend on their id alone (`sim.primitives.
+instance_rng`), so every generated dataset shares one instance pool whatever its seed or part.
+Each dataset splits them its own way (the default greedy 70/30 split balances sample counts,
+which depend on ``n`` and on the part's rejections; ``--split keyed`` fixes a subject's side by
+seed and id), so a model trained on one and tested on another can be tested on people or
+objects it was trained on. :func:`shared_groups` finds them.
 
     shared = shared_groups("data/forearm", "data/forearm3x")
     shared["test_samples"]   # test samples of forearm3x whose subject / instance forearm trained on
@@ -19,12 +23,14 @@ from learn.folder import is_dataset
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import DataError
 
-#: Manifest fields that fix the subject and instance pools (seed, part, pool sizes).
-POOL_KEYS = ("seed", "part", "n_subjects", "instances_per_kind")
+#: Manifest fields that fix the subject pool (the seed and the pool size; not the part).
+POOL_KEYS = ("seed", "n_subjects")
 
 
-def _pool(folder: Path) -> tuple | None:
-    """The pool identity of a generated dataset, None for one without a manifest."""
+def _pools(folder: Path) -> tuple[tuple, tuple] | None:
+    """(subject pool, instance pool) identities of a dataset, None without a manifest. The
+    generator's instances (configs with ``instances_per_kind``) are one global pool; other
+    writers' instance ids are taken to be as local as their subjects."""
     from tactile.dataset.manifest import read_manifest
 
     try:
@@ -32,7 +38,8 @@ def _pool(folder: Path) -> tuple | None:
     except DataError:
         return None
     config = manifest.get("config") or {}
-    return tuple(manifest.get(k, config.get(k)) for k in POOL_KEYS)
+    subjects = tuple(manifest.get(k, config.get(k)) for k in POOL_KEYS)
+    return subjects, (("generator",) if "instances_per_kind" in config else subjects)
 
 
 def _folder(path: str | Path) -> Path:
@@ -49,10 +56,11 @@ def _ids(reader: DatasetReader, field: str) -> np.ndarray:
 
 def shared_groups(train_data: str | Path, test_data: str | Path) -> dict | None:
     """Subjects and object instances of ``train_data``'s train split that are in ``test_data``'s
-    test split, when the two are different datasets drawn from one pool (manifests with the same
-    seed, part, subject count and instances per kind); None when that cannot happen (the same
-    folder: its split is disjoint by construction) or cannot be told (a folder missing, or one
-    without a manifest, e.g. ingested real data).
+    test split, when the two are different datasets that can share them: subjects when both
+    were drawn from one subject pool (the same seed and subject count, any part or size),
+    instances when both come from the generator (any seed) or share a subject pool. None when
+    that cannot happen (the same folder: its split is disjoint by construction; other pools) or
+    cannot be told (a folder missing, or one without a manifest, e.g. ingested real data).
 
     Returns ``{"subjects": [...], "instances": [...], "test_samples": int, "n_test": int}``: the
     shared ids and how many of the ``n_test`` test samples carry one.
@@ -62,12 +70,16 @@ def shared_groups(train_data: str | Path, test_data: str | Path) -> dict | None:
         return None
     if a.resolve() == b.resolve():
         return None
-    pool = _pool(a)
-    if pool is None or pool != _pool(b):
+    pools_a, pools_b = _pools(a), _pools(b)
+    if pools_a is None or pools_b is None:
+        return None
+    same = [pa == pb for pa, pb in zip(pools_a, pools_b, strict=True)]
+    if not any(same):
         return None
     with DatasetReader(a) as ra, DatasetReader(b) as rb:
         train, test = ra.splits["train"], rb.splits["test"]
-        seen = [set(_ids(ra, f)[train].tolist()) - {-1} for f in ("subject_id", "instance_id")]
+        seen = [set(_ids(ra, f)[train].tolist()) - {-1} if ok else set()
+                for f, ok in zip(("subject_id", "instance_id"), same, strict=True)]  # fmt: skip
         ids = [_ids(rb, f)[test] for f in ("subject_id", "instance_id")]
     hit = np.zeros(len(test), dtype=bool)
     shared = []
@@ -85,5 +97,6 @@ def leakage_note(shared: dict | None) -> str | None:
         return None
     return (f"**Not held out**: {shared['test_samples']} of the {shared['n_test']} test samples "
             f"come from {len(shared['subjects'])} subjects and {len(shared['instances'])} object "
-            "instances this model was trained on (the training dataset shares this one's "
-            "subject pool but not its split). Fix: score it on its own dataset's test split.")
+            "instances this model was trained on (the training dataset shares people or objects "
+            "with this one but not its split). Fix: score it on its own dataset's test split, "
+            "or generate both with --split keyed and one seed.")

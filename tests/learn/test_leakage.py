@@ -48,6 +48,42 @@ def test_shared_groups_against_the_ids(tiny_dataset, tmp_path):
     assert shared_groups(tiny_dataset, other) is None
 
 
+def as_generated(folder, **changes):
+    """Make ``folder``'s manifest look like the generator's (subject and instance pool keys),
+    with ``changes`` to its seed / part."""
+    path = folder / "manifest.json"
+    manifest = json.loads(path.read_text())
+    config = {**manifest["config"], "n_subjects": 90, "instances_per_kind": 20}
+    path.write_text(json.dumps({**manifest, "config": config, **changes}))
+    return folder
+
+
+def test_generated_sets_share_subjects_across_parts_and_instances_across_seeds(tiny_dataset,
+                                                                              tmp_path):
+    """The generator's subjects depend on (seed, id), its instances on the id alone: another part
+    of one seed can share both, another seed only the instances."""
+    with DatasetReader(tiny_dataset) as ds:
+        train = ds.splits["train"]
+        subject, instance = ds.subject_id[:], ds.instance_id[:]
+    test = train[::2]
+    mine = as_generated(resplit(tiny_dataset, tmp_path / "mine", tiny_ds_test(tiny_dataset)))
+    want_s = sorted(set(subject[test].tolist()) - {-1})
+    want_i = sorted(set(instance[test].tolist()) - {-1})
+    part = as_generated(resplit(tiny_dataset, tmp_path / "part", test), part="forearm_x2")
+    shared = shared_groups(mine, part)
+    assert shared["subjects"] == want_s and shared["instances"] == want_i
+    assert shared["test_samples"] == len(test)
+    seed = as_generated(resplit(tiny_dataset, tmp_path / "seed", test), seed=99)
+    shared = shared_groups(mine, seed)
+    assert shared["subjects"] == [] and shared["instances"] == want_i
+    assert shared["test_samples"] == int((instance[test] >= 0).sum()) > 0
+
+
+def tiny_ds_test(folder) -> np.ndarray:
+    with DatasetReader(folder) as ds:
+        return ds.splits["test"]
+
+
 def test_report_flags_scores_that_are_not_held_out(tiny_dataset, checkpoints, tmp_path):
     with DatasetReader(tiny_dataset) as ds:
         own_test = ds.splits["test"]
