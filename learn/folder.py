@@ -217,14 +217,24 @@ def subset(ds: Dataset, positions: np.ndarray) -> Dataset:
     return out
 
 
+def split_method(ds: Dataset) -> str:
+    """The train/test split method of ``ds``'s dataset (``tactile.dataset.splits.METHODS``):
+    its ``split_method`` attr, "greedy" for older datasets and image folders."""
+    if isinstance(ds, FolderDataset):
+        return "greedy"
+    return str(ds.reader.attrs.get("split_method", "greedy"))
+
+
 def validation_split(ds: Dataset, fraction: float, seed: int) -> tuple[Dataset, Dataset | None]:
-    """(train, val): subjects and instances disjoint, class-stratified (tactile splits)."""
+    """(train, val): subjects and instances disjoint, class-stratified (tactile splits); keyed
+    (stream 1, so independent of the test split's draws) when the dataset's split is keyed."""
     if fraction <= 0:
         return ds, None
     cls, subject, instance = group_ids(ds)
     if cls is not None:
         cls = (np.asarray(cls) > 0).astype(np.int64) if cls.max(initial=0) <= 1 else None
-    split = split_indices(cls, subject, instance, train_fraction=1.0 - fraction, seed=seed)
+    split = split_indices(cls, subject, instance, train_fraction=1.0 - fraction, seed=seed,
+                          method=split_method(ds), stream=1)  # fmt: skip
     return subset(ds, split.train), subset(ds, split.test)
 
 

@@ -160,6 +160,11 @@ def generate_command(
     seed: Annotated[int | None, typer.Option(
         help="Dataset seed (integer >= 0); sample i depends only on (seed, i). Default: 0.")
     ] = None,
+    split: Annotated[str | None, typer.Option(
+        help="Train/test split: greedy (70/30 by samples; default) or keyed (each subject's "
+             "and object instance's side fixed by the seed and its id, so datasets of one seed "
+             "on any part, of any size, hold out the same people; fractions within a few "
+             "points of 70/30).")] = None,
     workers: Annotated[int | None, typer.Option(
         help="Worker processes or Ray actors (count). Default: all cores. Never changes "
              "the bytes.")] = None,
@@ -189,7 +194,8 @@ def generate_command(
 
     try:
         cfg = load_generate_config(config, part=part, n=n, hand_fraction=hand_fraction,
-                                   seed=seed, keep_sequences=keep_sequences, chunk_size=chunk_size)
+                                   seed=seed, split=split, keep_sequences=keep_sequences,
+                                   chunk_size=chunk_size)
         if print_config:
             typer.echo(to_toml(cfg), nl=False)
             return

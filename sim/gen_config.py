@@ -70,6 +70,10 @@ class GenerateConfig:
     # Simulated people (ids s0000..): 90 volunteers as in the paper. Drawn from the dataset seed
     # (reserved spawn key), so the same seed gives the same people whatever n is.
     n_subjects: int = 90
+    # Train/test split (`tactile.dataset.splits.METHODS`): "greedy" (sample fractions closest to
+    # 70/30) or "keyed" (a subject's or instance's side fixed by the seed and its id alone, so
+    # datasets of one seed on any part and of any n hold out the same people).
+    split: str = "greedy"
     instances_per_kind: int = 20  # object / body-part instances per type (`sim.nonhand`)
     # Collision detail of the hands (`sim.hand.HAND_DETAILS`): "full" (metacarpal and heel
     # capsules round the palm) or "coarse" (the palm is two flat boxes); fingers are the same.
@@ -86,7 +90,10 @@ class GenerateConfig:
             check_range(name, _get(self, name), lo, hi)
         check_part(self.part)
         from sim.hand import HAND_DETAILS
+        from tactile.dataset.splits import METHODS
 
+        if self.split not in METHODS:
+            raise ConfigError(f"split = {self.split!r} unknown; choose one of {', '.join(METHODS)}")
         if self.hand_detail not in HAND_DETAILS:
             raise ConfigError(f"hand_detail = {self.hand_detail!r} unknown; choose one of "
                               f"{', '.join(HAND_DETAILS)}")  # fmt: skip

@@ -1,9 +1,11 @@
-"""Shared fixtures: the real public data in ../shared/data (never copied into the project)."""
+"""Shared fixtures: the real public data in ../shared/data (never copied into the project), and
+the keyed split's rule written out slowly."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
@@ -24,3 +26,40 @@ def icub_positions(shared_data: Path) -> Path:
     if not path.is_dir():
         pytest.skip(f"iCub skin layouts not found at {path}")
     return path
+
+
+def keyed_reference_sides(keys, seed: int, fraction: float = 0.7, stream: int = 0) -> dict:
+    """The keyed split's documented rule, written out slowly (tactile.dataset.splits):
+    {(kind, id): in train} for unit keys (0, subject) — hands — and (1, instance) — the rest.
+    Train when the uniform draw of SeedSequence([seed, stream, kind, id]) is below ``fraction``;
+    a class all on one side gives up the unit whose draw lies nearest the threshold."""
+    draws = {}
+    for key in keys:
+        bits = np.random.PCG64(np.random.SeedSequence([seed, stream, *key]))
+        draws[key] = np.random.Generator(bits).random()
+    sides = {k: d < fraction for k, d in draws.items()}
+    for kind in (0, 1):
+        mine = [k for k in keys if k[0] == kind]
+        if len(mine) >= 2 and len({sides[k] for k in mine}) == 1:
+            moved = (max if sides[mine[0]] else min)(mine, key=draws.__getitem__)
+            sides[moved] = not sides[moved]
+    return sides
+
+
+def group_sides(subject_id, instance_id, train_index) -> dict:
+    """{(0, subject) or (1, instance): in train} of samples with one id each, from the train
+    indices; asserts that no subject or instance lies on both sides."""
+    train = np.zeros(len(subject_id), bool)
+    train[np.asarray(train_index, dtype=np.int64)] = True
+    sides: dict = {}
+    for s, i, t in zip(np.asarray(subject_id).tolist(), np.asarray(instance_id).tolist(),
+                       train.tolist(), strict=True):  # fmt: skip
+        sides.setdefault((0, s) if s >= 0 else (1, i), set()).add(t)
+    assert all(len(v) == 1 for v in sides.values()), "a subject or instance on both sides"
+    return {k: v.pop() for k, v in sides.items()}
+
+
+@pytest.fixture(scope="session")
+def keyed_reference():
+    """(keyed_reference_sides, group_sides): the keyed split's rule and a dataset's sides."""
+    return keyed_reference_sides, group_sides

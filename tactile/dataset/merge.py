@@ -19,7 +19,7 @@ import numpy as np
 from tactile.dataset import h5io
 from tactile.dataset.manifest import read_manifest
 from tactile.dataset.schema import BY_NAME, STR, Dims, info_fields
-from tactile.dataset.splits import TRAIN_FRACTION, split_indices
+from tactile.dataset.splits import METHODS, TRAIN_FRACTION, split_indices
 from tactile.dataset.writer import CHUNKS, STATIC, chunk_path, json_attr, list_chunks
 from tactile.errors import DataError
 from tactile.labels import CLASS_NAMES, N_CLASSES
@@ -140,12 +140,19 @@ def merge_chunks(
 ) -> Path:
     """Merge ``folder/chunks/chunk_*.h5`` into ``folder/dataset.h5`` and write ``info.json``.
 
+    The train/test split uses the manifest's seed and its configuration's ``split`` method
+    (``tactile.dataset.splits.METHODS``; "greedy" when absent), recorded as ``split_method``.
+
     The chunks must be 0..K-1 without gaps (K = ``n_chunks`` when given, so an unfinished run is
     refused) and agree in fields and shapes. ``dataset.h5`` is
     replaced atomically; ``remove_chunks`` deletes ``chunks/`` afterwards. Returns the file path.
     """
     folder = Path(folder)
     manifest = read_manifest(folder)
+    method = str((manifest.get("config") or {}).get("split", "greedy"))
+    if method not in METHODS:
+        raise DataError(f"{folder}: the manifest's split method {method!r} is unknown; choose one "
+                        f"of {', '.join(METHODS)} in its configuration")
     if not (folder / CHUNKS / STATIC).exists():
         raise DataError(f"{folder}: {CHUNKS}/{STATIC} is missing. Fix: rerun the generator")
     ks = _chunks_to_merge(folder, n_chunks)
@@ -156,7 +163,7 @@ def merge_chunks(
         stats = _stream(f, folder, ks, counts, shapes)
         split = split_indices(
             stats.column("is_hand"), stats.column("subject_id"), stats.column("instance_id"),
-            train_fraction=train_fraction, seed=int(manifest["seed"]),
+            train_fraction=train_fraction, seed=int(manifest["seed"]), method=method,
         )  # fmt: skip
         g = h5io.group(f, "splits")
         h5io.plain_dataset(g, "train", split.train.astype(np.int64))
@@ -164,7 +171,7 @@ def merge_chunks(
         with h5py.File(folder / CHUNKS / STATIC, "r") as static:
             h5io.copy_tree(static["map"], h5io.group(f, "map"))
             extra = dict(static.attrs)
-        attrs = _root_attrs(manifest, stats, split.report, sum(counts), train_fraction)
+        attrs = _root_attrs(manifest, stats, split.report, sum(counts), train_fraction, method)
         h5io.set_attrs(f, {**extra, **attrs})
         info.update(_info(manifest, attrs, shapes, extra, f["map"].attrs["dims"]))
 
@@ -176,7 +183,8 @@ def merge_chunks(
     return path
 
 
-def _root_attrs(manifest: dict, stats: _Stats, report: dict, n: int, fraction: float) -> dict:
+def _root_attrs(manifest: dict, stats: _Stats, report: dict, n: int, fraction: float,
+                method: str) -> dict:  # fmt: skip
     return {
         "format": manifest["format"],
         "fingerprint": manifest["fingerprint"],
@@ -189,6 +197,7 @@ def _root_attrs(manifest: dict, stats: _Stats, report: dict, n: int, fraction: f
         "rejects": dict(sorted(stats.rejects.items())),
         "split_report": report,
         "train_fraction": float(fraction),
+        "split_method": method,
         "n_samples": int(n),
     }  # fmt: skip
 
@@ -197,7 +206,7 @@ def _info(manifest: dict, attrs: dict, shapes: dict, extra: dict, dims: np.ndarr
     seq = shapes["seq_raw"][0] if "seq_raw" in shapes else None
     d = Dims(int(dims[0]), int(dims[1]), int(dims[2]), seq)
     keys = ("format", "fingerprint", "part", "seed", "generator_version", "n_samples",
-            "class_balance", "rejects", "split_report", "versions")  # fmt: skip
+            "class_balance", "rejects", "split_method", "split_report", "versions")  # fmt: skip
     return {
         **{k: attrs[k] for k in keys},
         "dims": {"N": d.n_taxels, "H": d.height, "W": d.width, "T": d.seq_len},

@@ -35,7 +35,7 @@ STATIC = "static.h5"  # chunks/static.h5: map, layout, dims and the caller's att
 CHUNK_RE = re.compile(r"^chunk_(\d{6})\.h5$")
 RESERVED_ATTRS = frozenset(
     {"format", "fingerprint", "config", "versions", "generator_version", "seed", "part",
-     "class_balance", "rejects", "split_report", "train_fraction", "n_samples"}
+     "class_balance", "rejects", "split_method", "split_report", "train_fraction", "n_samples"}
 )  # fmt: skip
 
 

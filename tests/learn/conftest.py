@@ -73,13 +73,14 @@ def as_object(row: dict) -> dict:
 
 
 def write_tiny_dataset(folder, samples: list[int], drop: tuple[str, ...] = (),
-                       hands_as_objects: bool = False):  # fmt: skip
+                       hands_as_objects: bool = False, split: str | None = None):  # fmt: skip
     """Write samples ``samples`` (`make_sample` numbering) of the tiny set to ``folder``,
-    without the fields ``drop``, the hands recorded as objects if ``hands_as_objects``;
-    returns the folder."""
+    without the fields ``drop``, the hands recorded as objects if ``hands_as_objects``, split by
+    method ``split`` (None: the default, greedy); returns the folder."""
     layout, flat_mm = cylinder_sector_layout(width_mm=60, length_mm=90, pitch_mm=5)
     tmap = TactileMap.build(layout)
-    writer = DatasetWriter(folder, config={"test": "tiny"}, part="sector", generator_version="t",
+    config = {"test": "tiny"} if split is None else {"test": "tiny", "split": split}
+    writer = DatasetWriter(folder, config=config, part="sector", generator_version="t",
                            seed=3, tmap=tmap, layout=layout,
                            attrs={"skin_counts_per_pa": GAIN})  # fmt: skip
     rows = [make_sample(i, tmap, flat_mm) for i in samples]

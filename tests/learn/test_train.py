@@ -27,6 +27,8 @@ from tactile.config import to_dict
 from tactile.dataset import open_dataset
 from tactile.errors import ConfigError
 
+from .conftest import N_HAND, N_OTHER
+
 
 @pytest.fixture(autouse=True)
 def _one_thread():
@@ -57,6 +59,26 @@ def test_validation_is_subject_disjoint(tiny_dataset):
     assert set(i_tr[i_tr >= 0]).isdisjoint(i_va[i_va >= 0])
     assert set(c_va) == {0, 1} and set(train.indices).isdisjoint(val.indices)
     assert set(np.r_[train.indices, val.indices]) == set(open_dataset(tiny_dataset).splits["train"])
+
+
+def test_validation_inside_a_keyed_split_is_keyed(tiny_writer, keyed_reference, tmp_path):
+    """A dataset split by key gets a keyed validation split: the train split's units drawn again
+    with the training seed on stream 1 (independent of the test split's stream 0)."""
+    reference, sides_of = keyed_reference
+    folder = tiny_writer(tmp_path / "keyed", list(range(N_HAND + N_OTHER)), split="keyed")
+    with open_dataset(folder) as ds:
+        assert ds.attrs["split_method"] == "keyed"
+        subject, instance = ds["subject_id"][()], ds["instance_id"][()]
+        assert sides_of(subject, instance, ds.splits["train"]) == reference(
+            set(sides_of(subject, instance, ds.splits["train"])), seed=3)
+    ds = TorchTactileDataset(folder, split="train", flips=False)
+    for seed in (0, 7):
+        train, val = validation_split(ds, 0.3, seed=seed)
+        keep = np.sort(ds.indices)
+        sides = sides_of(subject[keep], instance[keep],
+                         np.flatnonzero(np.isin(keep, train.indices)))  # fmt: skip
+        assert sides == reference(set(sides), seed, fraction=0.7, stream=1)
+        assert set(np.r_[train.indices, val.indices]) == set(keep)
 
 
 def test_checkpoint_round_trip_and_resume(tiny_dataset, tiny_run, tmp_path):

@@ -96,6 +96,24 @@ def test_dataset_content_classes_subjects_and_split(reference: Path) -> None:
         assert ds.attrs["versions"]["mujoco"] and ds.attrs["generator_version"]
 
 
+def test_keyed_split_holds_out_the_same_people_at_any_n(tmp_path: Path, keyed_reference) -> None:
+    """--split keyed: each dataset's sides are the documented draws (tactile.dataset.splits),
+    and a dataset twice the size (more samples per subject and instance, more instances) keeps
+    every shared subject and instance on its side unless the small one needed the both-sides
+    exception."""
+    reference, sides_of = keyed_reference
+    sides = []
+    for n in (12, 24):
+        generate(small(split="keyed", n=n), tmp_path / f"n{n}", workers=1, progress=False)
+        with open_dataset(tmp_path / f"n{n}") as ds:
+            assert ds.attrs["split_method"] == "keyed"
+            sides.append(sides_of(ds["subject_id"][()], ds["instance_id"][()], ds.splits["train"]))
+        assert sides[-1] == reference(set(sides[-1]), SMALL["seed"])
+    common = sides[0].keys() & sides[1].keys()
+    moved = [k for k in common if sides[0][k] != sides[1][k]]
+    assert len(common) >= 6 and len(moved) <= 1  # seed 5: n = 12 puts all instances in train
+
+
 def test_sigkill_mid_run_then_resume_equals_uninterrupted(reference: Path, tmp_path: Path) -> None:
     out = tmp_path / "killed"
     cfg_file = tmp_path / "small.toml"
@@ -149,6 +167,7 @@ def test_folder_of_another_configuration_is_refused_untouched(reference: Path) -
         ({"chunk_size": 0}, r"chunk_size = 0 is out of range"),
         ({"episode": {"solver_iterations": 0}}, r"episode.solver_iterations = 0 is out of range"),
         ({"hand_detail": "fine"}, r"hand_detail = 'fine' unknown; choose one of full, coarse"),
+        ({"split": "random"}, r"split = 'random' unknown; choose one of greedy, keyed"),
     ],
 )
 def test_bad_values_fail_naming_field_and_range(changes: dict, message: str) -> None:
