@@ -9,9 +9,9 @@ draw over that part's taxels, `sim.placement.draw_aim_taxel`), so the print lies
 the map. Their default (greedy) test splits still differ (the split balances the subjects'
 sample counts, which a redraw changes), so two `handskin evaluate` reports score their models on
 partly different people; datasets generated with ``--split keyed`` hold out the same people and
-keep nearly all their test presses in common. This script keeps the samples that are in both test splits with the same episode seed
-and subject — the same person, contactor and press plan on each skin — and compares every row
-of report A with the row of report B of the same method:
+keep nearly all their test presses in common. This script keeps the samples that are in both
+test splits with the same episode seed and subject — the same person, contactor and press plan
+on each skin — and compares every row of report A with the row of report B of the same method:
 classifiers by accuracy and McNemar's exact test on the samples exactly one gets right,
 segmenters by mIoU; both with a paired 95 % interval of B − A that redraws whole test subjects
 and object instances (`learn.cluster_bootstrap`, as the reports' "subjects resampled" columns):

@@ -210,6 +210,23 @@ def generate_command(
     )
     typer.echo(f"dataset: {report.dataset}" if report.dataset else
                f"shard {shard} written to {out}; merge the shards with `handskin merge`")
+    if report.dataset:
+        typer.echo(split_line(report.dataset))
+
+
+def split_line(dataset: Path) -> str:
+    """One line on a merged dataset's train/test split: method, samples and held-out groups."""
+    from tactile.dataset import open_dataset
+
+    with open_dataset(dataset) as ds:
+        test = ds.splits["test"]
+        groups = [len(set(ds[f][()][test].tolist()) - {-1}) if f in ds.fields else 0
+                  for f in ("subject_id", "instance_id")]  # fmt: skip
+        method = ds.attrs.get("split_method", "greedy")
+        n = len(ds)
+    return (f"split ({method}): {n - len(test)} train / {len(test)} test samples "
+            f"({100 * (n - len(test)) / max(n, 1):.1f} % train); held out: {groups[0]} subjects, "
+            f"{groups[1]} object / body-part instances")
 
 
 def merge_command(

@@ -130,8 +130,13 @@ def test_sigkill_mid_run_then_resume_equals_uninterrupted(reference: Path, tmp_p
         proc.send_signal(signal.SIGKILL)
         proc.wait()
     assert 1 <= len(list_chunks(out)) < 4 and not (out / "dataset.h5").exists()
-    subprocess.run(argv, cwd=ROOT, env=_env(), check=True)
+    done = subprocess.run(argv, cwd=ROOT, env=_env(), check=True, capture_output=True, text=True)
     assert sha256(out / "dataset.h5") == sha256(reference / "dataset.h5")
+    with open_dataset(reference) as ds:  # the closing line says how the dataset was split
+        train, test = ds.splits["train"], ds.splits["test"]
+        held = len(set(ds["subject_id"][()][test].tolist()) - {-1})
+    assert (f"split (greedy): {len(train)} train / {len(test)} test samples "
+            f"({100 * len(train) / 12:.1f} % train); held out: {held} subjects") in done.stdout
 
 
 CLI = ("part", "n", "seed", "chunk_size")
