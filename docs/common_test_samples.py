@@ -16,7 +16,10 @@ classifiers by accuracy and McNemar's exact test on the samples exactly one gets
 segmenters by mIoU; both with a paired 95 % interval of B − A that redraws whole test subjects
 and object instances (`learn.cluster_bootstrap`, as the reports' "subjects resampled" columns):
 prints of one person are alike, so single samples are not independent.
-Both reports' training datasets must be at the paths their checkpoints record.
+A report row names the dataset it was scored on (``test_data``); the same press is read from
+that dataset, so a model scored on another part's dataset (``handskin evaluate --data``) is
+compared on the presses of the data it was scored on. Rows written before that field was added
+are taken to be scored on their training dataset. The datasets must be at the recorded paths.
 """
 
 from __future__ import annotations
@@ -44,9 +47,15 @@ def press_keys(data_dir: Path) -> np.ndarray:
                                 np.asarray(s["subject_id"][:]).astype(np.int64)])  # fmt: skip
 
 
+def scored_on(row: dict) -> Path:
+    """The dataset a report row was scored on (older rows: their training dataset)."""
+    return Path(row.get("test_data") or row["train_data"]["path"])
+
+
 def common(a: dict, b: dict) -> np.ndarray:
-    """Sample indices in both rows' test splits whose press is the same in both datasets."""
-    ka, kb = (press_keys(Path(r["train_data"]["path"])) for r in (a, b))
+    """Sample indices in both rows' test splits whose press is the same in the datasets the rows
+    were scored on."""
+    ka, kb = (press_keys(scored_on(r)) for r in (a, b))
     both = np.intersect1d(a["test_indices"], b["test_indices"])
     both = both[(both < len(ka)) & (both < len(kb))]
     return both[np.all(ka[both] == kb[both], axis=1)]

@@ -268,6 +268,6 @@ def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
             "ms_per_image": {"fast": ms, "gpu": None}, "timing": TIMING[meta["kind"]],
             "threads": threads, "seed": meta["seed"], "config": meta["config"],
             "input_size": meta["input_size"], "train_versions": meta["versions"],
-            "train_data": meta.get("data"),
+            "train_data": meta.get("data"), "test_data": str(data),
             "shared_with_training": shared_with_training(meta.get("data"), data),
             **found}  # fmt: skip

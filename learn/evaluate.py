@@ -330,7 +330,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "config": ckpt["config"], "input_size": list(size),
            "canvas_mm": run.model.canvas_mm and list(run.model.canvas_mm),
            "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
-           "init": ckpt.get("init"),
+           "test_data": str(data_path), "init": ckpt.get("init"),
            "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
            **found, "segmentation_by_group": seg_groups, "worst": worst,
            "mean_iou_interval": miou_interval and miou_interval[:2],

@@ -140,7 +140,7 @@ def test_report_tells_models_of_one_method_apart(checkpoints, tiny_dataset, tmp_
     """Two HandsNets trained on different data: two labelled rows, each beside the paper's
     number and naming its training data; one "trained on" line per model in the details."""
     row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3)
-    assert row["train_data"]["path"] == str(tiny_dataset)
+    assert row["train_data"]["path"] == row["test_data"] == str(tiny_dataset)
     other = dict(row, train_data={"path": "/data/forearm3x", "n_train": 6300},
                  metrics=dict(row["metrics"], accuracy=0.5))  # fmt: skip
     text = write_report([row, other], tmp_path / "r.md").read_text()
@@ -189,6 +189,7 @@ def test_vgg_svm_train_save_load_evaluate(vgg16_checkpoint, checkpoints, tiny_da
                                rtol=1e-6, atol=1e-6)  # fmt: skip
     np.testing.assert_allclose(loaded.features(x), fresh.features(x))  # the weights came back
     row = evaluate_classical(out / MODEL_FILE, tiny_dataset, time_runs=3)
+    assert row["test_data"] == str(tiny_dataset)
     assert row["cm"] == report["test_confusion"] == confusion(y, fresh.predict(x), 2).tolist()
     rows = [row, evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3)]
     text = write_report(rows, tmp_path / "r.md").read_text()
