@@ -9,8 +9,10 @@ after ``prepare_for_inference`` (batch norm folded, channels-last), against the 
 learning issue (HandsNet ≤ 3 ms, SegNet ≤ 60 ms per image on one CPU core, judged on the
 prepared model). Then the ensemble of the CPU segmenter presets (SegNet and FCN-16s at width
 0.25, the mean of their softmax: ``handskin evaluate --ensemble``), with and without test-time
-flips, prepared, against the same SegNet target. Figures are printed, never asserted: they
-depend on the machine and its load.
+flips, prepared, against the same SegNet target. Then HandsNet as an int8 network
+(``learn.quantize``, oneDNN; activation ranges from 64 seeded sparse random images, which set
+the scales but not the kernels' speed) against the prepared float one and the same target.
+Figures are printed, never asserted: they depend on the machine and its load.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from learn import config as C
 from learn.ensemble import MeanSoftmax
 from learn.metrics import time_per_image
 from learn.models import MODELS, count_parameters, create_model, prepare_for_inference
+from learn.quantize import int8_supported, quantize_int8
 from learn.tta import PAPER_VIEWS, FlipTTA
 
 TARGET_MS_ONE_CORE = {"handsnet": 3.0, "segnet": 60.0}  # from the learning issue
@@ -80,6 +83,24 @@ def bench_ensemble(size: tuple[int, int], runs: int, width: float = 0.25) -> lis
     return rows
 
 
+def bench_int8(size: tuple[int, int], runs: int) -> str:
+    """Printed row: HandsNet prepared (float) and int8, 1 and 2 threads, the int8 speed-up and
+    the HandsNet target on one core."""
+    if not int8_supported():
+        return "handsnet int8: skipped, this PyTorch has no oneDNN quantized engine"
+    model = create_model("handsnet", input_size=size).eval()
+    calib = torch.rand(64, 1, *size, generator=torch.Generator().manual_seed(0)) ** 4
+    cells = []
+    for net in (prepare_for_inference(model), quantize_int8(model, calib)):
+        for threads in (1, 2):
+            torch.set_num_threads(threads)
+            cells.append(1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs))
+    target = TARGET_MS_ONE_CORE["handsnet"]
+    return (f"handsnet float prep 1 {cells[0]:7.2f}, prep 2 {cells[1]:7.2f} | int8 1 "
+            f"{cells[2]:7.2f}, int8 2 {cells[3]:7.2f} | int8 {cells[0] / cells[2]:.2f}x faster "
+            f"on 1 core, target ≤ {target:g}: {'ok' if cells[2] <= target else 'MISSED'}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=50, help="timed runs after 10 warm-up runs")
@@ -102,6 +123,8 @@ def main() -> None:
     print("ensemble of the CPU segmenter presets, ms / image:")
     for row in bench_ensemble(size, args.runs):
         print(row, flush=True)
+    print("HandsNet as an int8 network (oneDNN), ms / image:")
+    print(bench_int8(size, args.runs), flush=True)
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ from learn.evaluate import (
     confusion_markdown,
 )
 from learn.leakage import leakage_note
-from learn.row_labels import TTA_SUFFIX, data_name, row_labels, trained_precision
+from learn.row_labels import INT8_SUFFIX, TTA_SUFFIX, data_name, row_labels, trained_precision
 
 
 def _fmt(v: float | None, scale: float = 1.0) -> str:
@@ -65,15 +65,17 @@ def _shown_longer(name: str, ours: dict[str, dict]) -> bool:
 
 
 def _names(paper_table: dict, ours: dict[str, dict]) -> list[str]:
-    """Row order of a table: the paper's methods, then ours; a row with test-time flips right
-    after the same method's plain row."""
+    """Row order of a table: the paper's methods, then ours; a method's int8 row, then its rows
+    with test-time flips, right after its plain row."""
     names = list(dict.fromkeys([*paper_table, *ours]))
-    plain = [n for n in names if TTA_SUFFIX not in n]
-    for n in (n for n in names if TTA_SUFFIX in n):
-        base = n.replace(TTA_SUFFIX, "")
-        after = [i for i, p in enumerate(plain) if p == base or p.startswith(base + ",")]
-        plain.insert(after[-1] + 1 if after else len(plain), n)
-    return plain
+    for suffix in (TTA_SUFFIX, INT8_SUFFIX):
+        plain = [n for n in names if suffix not in n]
+        for n in (n for n in names if suffix in n):
+            base = n.replace(suffix, "")
+            after = [i for i, p in enumerate(plain) if p == base or p.startswith(base + ",")]
+            plain.insert(after[-1] + 1 if after else len(plain), n)
+        names = plain
+    return names
 
 
 def _table3(rows: list[dict]) -> list[str]:
@@ -114,6 +116,9 @@ def _timing(r: dict) -> str:
     ms, head = r["ms_per_image"], f"CPU ms/image at batch 1, {r['threads']} thread(s): "
     if r.get("timing"):  # a classical model: one path, image to label
         return head + f"{_fmt(ms['fast'])} ({r['timing']})"
+    if q := r.get("int8"):  # one path: the int8 network
+        return head + (f"{_fmt(ms['fast'])}, int8 ({q['backend']}; activation ranges from "
+                       f"{q['calibration_images']} images of the {q['calibration_split']} split)")
     gpu = "none (no CUDA)" if ms["gpu"] is None else _fmt(ms["gpu"])
     return (head + f"eval mode {_fmt(ms['eval_mode'])}, prepared (BN folded) "
             f"{_fmt(ms['prepared'])}, fast path {_fmt(ms['fast'])} "

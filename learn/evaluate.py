@@ -218,11 +218,14 @@ SEG_KEYS = ("pixel_accuracy", "mean_accuracy", "mean_iou", "fw_iou")
 
 def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                         hand_classes: tuple[str, ...] | None = None, threads: int = 1,
-                        time_runs: int = 100, tta: bool = False) -> dict:  # fmt: skip
+                        time_runs: int = 100, tta: bool = False,
+                        int8: bool = False) -> dict:  # fmt: skip
     """Test-split metrics (float and fast path) and CPU ms/image (1 thread by default) of a
     checkpoint (a .pt file; a classical model.npz goes to ``learn.classical.evaluate_classical``);
     a JSON-able dict (one row of the report). ``tta``: every path, timing included, runs with
-    test-time flips over the views the network was trained on (`learn.tta.FlipTTA`)."""
+    test-time flips over the views the network was trained on (`learn.tta.FlipTTA`). ``int8``
+    (HandsNet only): scores, breakdowns and timing are of its int8 copy (`learn.quantize`),
+    calibrated on training images of ``data_path``."""
     from learn.checkpoint import load_checkpoint, model_from_checkpoint
     from learn.ensemble import Member
 
@@ -234,7 +237,7 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     ckpt = load_checkpoint(ckpt_path)
     model, run = model_from_checkpoint(ckpt)
     return _evaluate_members([Member(Path(ckpt_path), ckpt, model, run)], data_path,
-                             hand_classes, threads, time_runs, tta)  # fmt: skip
+                             hand_classes, threads, time_runs, tta, int8)  # fmt: skip
 
 
 def evaluate_ensemble(ckpt_paths: list[str | Path], data_path: str | Path, *,
@@ -251,8 +254,10 @@ def evaluate_ensemble(ckpt_paths: list[str | Path], data_path: str | Path, *,
 
 
 def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[str, ...] | None,
-                      threads: int, time_runs: int, tta: bool) -> dict:  # fmt: skip
-    """The report row of one network or the mean of several (`learn.ensemble.Member` list)."""
+                      threads: int, time_runs: int, tta: bool,
+                      int8: bool = False) -> dict:  # fmt: skip
+    """The report row of one network or the mean of several (`learn.ensemble.Member` list);
+    ``int8``: of one HandsNet's int8 copy."""
     from learn.breakdown import (
         N_WORST_KEPT,
         N_WORST_MAPS,
@@ -285,7 +290,13 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     n_cls = run.model.num_classes
     on_dataset = is_dataset(data_path)
     classify_data = run.task == "classify" and on_dataset
-    model = build(lambda m: m)
+    calib = None
+    if int8:  # a ConfigError for another network; calibrated on training images, not test
+        from learn.quantize import BACKEND, calibration_images, quantize_int8, traceable_body
+
+        traceable_body(first.model)
+        calib = calibration_images(Path(data_path), run, hand)
+    model = build((lambda m: quantize_int8(m, calib)) if int8 else (lambda m: m))
     ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
     seg_groups = worst = miou_interval = groups = None
     if on_dataset:  # each test sample's subject / object instance, for intervals over them
@@ -312,16 +323,22 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
         worst = {"images": worst[:N_WORST_KEPT],
                  "maps": pack_labels(pred[order[:N_WORST_MAPS]])}  # fmt: skip
         miou_interval = [*mean_iou_interval(cms), *grouped_mean_iou_interval(cms, groups)]
-    fast = build(lambda m: fast_inference(m, check=test.x[:64]))
-    res = evaluate_tensors(fast, test, n_cls)
-    if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
-        fast = build(lambda m: fast_inference(m, bf16=False))
-        res = evaluate_tensors(fast, test, n_cls)
     size = run.model.input_size
-    ms = {"eval_mode": cpu_ms_per_image(model, size, threads, time_runs),
-          "prepared": cpu_ms_per_image(build(prepare_for_inference), size, threads, time_runs),
-          "fast": cpu_ms_per_image(fast, size, threads, time_runs),
-          "gpu": gpu_ms_per_image(model, size)}  # fmt: skip
+    if int8:  # one path: the int8 network is its own fast path
+        fast, res = model, ref
+        t = cpu_ms_per_image(model, size, threads, time_runs)
+        ms = {"eval_mode": t, "prepared": t, "fast": t, "gpu": None}
+    else:
+        fast = build(lambda m: fast_inference(m, check=test.x[:64]))
+        res = evaluate_tensors(fast, test, n_cls)
+        if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
+            fast = build(lambda m: fast_inference(m, bf16=False))
+            res = evaluate_tensors(fast, test, n_cls)
+        ms = {"eval_mode": cpu_ms_per_image(model, size, threads, time_runs),
+              "prepared": cpu_ms_per_image(build(prepare_for_inference), size, threads,
+                                           time_runs),
+              "fast": cpu_ms_per_image(fast, size, threads, time_runs),
+              "gpu": gpu_ms_per_image(model, size)}  # fmt: skip
     row = {"checkpoint": str(first.path), "arch": run.model.arch, "task": run.task,
            "epoch": ckpt["epoch"], "class_names": list(ckpt.get("class_names", [])),
            "n_test": len(test.y), "cm": ref.cm.tolist(), "metrics": ref.metrics,
@@ -338,7 +355,10 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "per_image_cm": None if miou_interval is None else cms.astype(np.int64).tolist(),
            "test_indices": None if groups is None else [int(i) for i in split.indices],
            "test_groups": None if groups is None else groups.tolist(),
-           "tta_views": views and views[0]}  # fmt: skip
+           "tta_views": views and views[0],
+           "int8": None if calib is None else {
+               "backend": BACKEND, "calibration_images": len(calib),
+               "calibration_split": "train"}}  # fmt: skip
     return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
 
 

@@ -37,15 +37,18 @@ def _members_data(members: list[dict]) -> str:
 
 #: Label suffix of a row scored with test-time flips (``learn.tta``).
 TTA_SUFFIX = " + test-time flips"
+#: Label suffix of a row scored as an int8 network (``learn.quantize``).
+INT8_SUFFIX = " int8"
 
 
 def row_labels(rows: list[dict]) -> list[str]:
-    """Table labels of report rows: the method's name (``ARCH_LABEL``, then `TTA_SUFFIX` for
-    test-time flips); where two rows would share a label, the input size, then the width
-    multiplier, the training epochs, the training precision, the training views, the weight
-    averaging, the seed (each when theirs differ), then the training data, then the run folder,
-    added."""
-    labels = [method_label(r) + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]
+    """Table labels of report rows: the method's name (``ARCH_LABEL``, then `INT8_SUFFIX` for an
+    int8 network and `TTA_SUFFIX` for test-time flips); where two rows would share a label, the
+    input size, then the width multiplier, the training epochs, the training precision, the
+    training views, the weight averaging, the seed (each when theirs differ), then the training
+    data, then the run folder, added."""
+    labels = [method_label(r) + (INT8_SUFFIX if r.get("int8") else "")
+              + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]  # fmt: skip
     for extra, only_if_differs in ((size_label, True),
                                    (lambda r: width_label(r) or "default width", True),
                                    (epochs_label, True),
