@@ -8,6 +8,7 @@ per-model details (training data and start, timing, confusion matrix, breakdowns
 from __future__ import annotations
 
 import json
+import math
 import re
 from pathlib import Path
 
@@ -15,15 +16,22 @@ import numpy as np
 import torch
 
 from learn import metrics as M
-from learn.evaluate import (
-    ARCH_LABEL,
-    PAPER_TABLE3,
-    PAPER_TABLE8,
-    SEG_KEYS,
-    confusion_markdown,
-)
+from learn.evaluate import ARCH_LABEL, PAPER_TABLE3, PAPER_TABLE8, SEG_KEYS
 from learn.leakage import leakage_note
 from learn.row_labels import INT8_SUFFIX, TTA_SUFFIX, data_name, row_labels, trained_precision
+
+
+def confusion_markdown(cm: torch.Tensor, names: tuple[str, ...]) -> str:
+    """A markdown table of a confusion matrix as % of each true class (rows true)."""
+    pct = M.percent_by_true_class(cm).numpy()
+    head = "| true \\ predicted | " + " | ".join(names) + " |"
+    rows = [f"| {n} | " + " | ".join(_pct(v) for v in row) + " |"
+            for n, row in zip(names, pct, strict=True)]
+    return "\n".join([head, "|" + "---|" * (len(names) + 1), *rows])
+
+
+def _pct(v: float | None) -> str:
+    return "–" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.2f}"
 
 
 def _fmt(v: float | None, scale: float = 1.0) -> str:

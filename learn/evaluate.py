@@ -179,19 +179,6 @@ def plot_history(history: list[dict], path: str | Path, title: str = "",
     return Path(path)
 
 
-def confusion_markdown(cm: torch.Tensor, names: tuple[str, ...]) -> str:
-    """A markdown table of a confusion matrix as % of each true class (rows true)."""
-    pct = M.percent_by_true_class(cm).numpy()
-    head = "| true \\ predicted | " + " | ".join(names) + " |"
-    rows = [f"| {n} | " + " | ".join(_pct(v) for v in row) + " |"
-            for n, row in zip(names, pct, strict=True)]
-    return "\n".join([head, "|" + "---|" * (len(names) + 1), *rows])
-
-
-def _pct(v: float | None) -> str:
-    return "–" if v is None or (isinstance(v, float) and math.isnan(v)) else f"{v:.2f}"
-
-
 def metrics_from_cm(cm: np.ndarray | torch.Tensor) -> dict[str, float]:
     """The report's scores from a confusion matrix (fractions)."""
     return scores(torch.as_tensor(np.asarray(cm)))

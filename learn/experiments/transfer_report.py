@@ -46,7 +46,7 @@ def confusions(rows: list[tuple[str, dict]], names: list[str]) -> str:
     """Confusion matrices (% of each true class) of the rows, one after the other."""
     import torch
 
-    from learn.evaluate import confusion_markdown
+    from learn.eval_report import confusion_markdown
 
     return "\n\n".join(f"{n}, % of each true class:\n\n"
                        + confusion_markdown(torch.tensor(r["cm"]), tuple(names))

@@ -20,9 +20,8 @@ from learn.classical import (
     train_classical,
 )
 from learn.config import VggSvmConfig
-from learn.eval_report import save_error_sheets, write_report
+from learn.eval_report import confusion_markdown, save_error_sheets, write_report
 from learn.evaluate import (
-    confusion_markdown,
     evaluate_checkpoint,
     evaluate_tensors,
     fast_inference,
