@@ -28,6 +28,7 @@ from learn.checkpoint import load_checkpoint
 from learn.evaluate import fast_inference, tta_views
 from learn.folder import is_dataset, read_grey
 from learn.inputs import input_canvas, labels_on_map, net_input
+from learn.quantize import int8_from_checkpoint
 from learn.tta import FlipTTA
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
@@ -59,12 +60,19 @@ class Predictor:
             return self.model(torch.from_numpy(x)[None, None])[0].float()
 
 
-def load_predictor(path: str | Path | Sequence[str | Path], tta: bool = False) -> Predictor:
+def load_predictor(
+    path: str | Path | Sequence[str | Path],
+    tta: bool = False,
+    int8: bool = False,
+    calibration: str | Path | None = None,
+) -> Predictor:
     """A checkpoint written by ``handskin train``, ready for fast CPU inference; ``tta``: with
     test-time flips over the views it was trained on (`learn.tta.FlipTTA`; its logits are
     then the log of the mean softmax). Several checkpoints of one task make an ensemble
     (`learn.ensemble.MeanSoftmax`: the log of the mean of their softmax outputs), checked
-    alike (task, classes, input size) before any work."""
+    alike (task, classes, input size) before any work. ``int8`` (HandsNet only): each network
+    as its 8-bit copy, calibrated on the train split of ``calibration`` or of the data it was
+    trained on (`learn.quantize.int8_from_checkpoint`)."""
     from learn.checkpoint import model_from_checkpoint
     from learn.ensemble import MeanSoftmax, load_members
 
@@ -75,8 +83,9 @@ def load_predictor(path: str | Path | Sequence[str | Path], tta: bool = False) -
     else:
         members = [(m.path, m.ckpt, m.model, m.run) for m in load_members(path)]
     nets = []
-    for where, _, model, run in members:
-        fast = fast_inference(model)
+    for where, ckpt, model, run in members:
+        fast = (int8_from_checkpoint(model, run, ckpt, calibration) if int8
+                else fast_inference(model))  # fmt: skip
         nets.append(FlipTTA(fast, tta_views(run, where)) if tta else fast)
     _, ckpt, _, run = members[0]
     names = tuple(ckpt.get("class_names") or ())

@@ -22,6 +22,7 @@ import contextlib
 import copy
 import warnings
 from collections.abc import Iterator
+from pathlib import Path
 
 import torch
 from torch import nn
@@ -136,3 +137,24 @@ def calibration_images(data_path, run, hand_classes: tuple[str, ...] | None,
     gen = torch.Generator().manual_seed(run.train.seed)
     pick = torch.randperm(len(split), generator=gen)[:n].sort().values
     return materialize(torch.utils.data.Subset(split, pick.tolist()), "int8 calibration").x
+
+
+def int8_from_checkpoint(model: nn.Module, run, ckpt: dict,
+                         calibration: str | Path | None = None) -> Int8Classifier:  # fmt: skip
+    """The int8 copy of a checkpoint's HandsNet ``model`` (``run``: its `RunConfig`, both from
+    `learn.checkpoint.model_from_checkpoint`), calibrated on `N_CALIBRATION` images
+    of the train split of ``calibration`` (a dataset or image folder) or, if None, of the data
+    the checkpoint was trained on (``ckpt["data"]["path"]``). ConfigError, before the images are
+    read, for another network or when that data is not on this machine."""
+    traceable_body(model)
+    recorded = (ckpt.get("data") or {}).get("path")
+    where = Path(calibration) if calibration is not None else recorded and Path(recorded)
+    if where is None or not where.exists():
+        what = f"--calibration {calibration}" if calibration is not None else (
+            f"the checkpoint's training data {recorded}" if recorded else "no training data path "
+            "in the checkpoint")  # fmt: skip
+        raise ConfigError(f"int8 needs training images to set its activation ranges; {what}: "
+                          "not found. Fix: pass --calibration DATASET (a dataset or image folder "
+                          "of the same skin; its train split is used)")  # fmt: skip
+    hand = (ckpt.get("data") or {}).get("hand_classes")
+    return quantize_int8(model, calibration_images(where, run, hand and tuple(hand)))

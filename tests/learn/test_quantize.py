@@ -128,3 +128,51 @@ def test_evaluate_int8_row(checkpoints, tiny_dataset, tmp_path):
     assert "int8 (onednn; activation ranges from" in md.read_text()
     direct = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3, int8=True)
     assert direct["cm"] == q["cm"]  # calibration drawn by the run's seed: the same network
+
+
+def test_predict_int8(checkpoints, tiny_dataset, tmp_path):
+    """``handskin predict --int8``: the int8 classifier is the one ``evaluate --int8`` scores
+    (calibrated on the checkpoint's training data by default, or on ``--calibration``), so its
+    probability for a sample is that network's softmax; bad combinations and a missing
+    calibration set are refused before any picture is written."""
+    from learn.predict import load_predictor, read_sample
+
+    app = typer.Typer()
+    register(app)
+    runner = CliRunner()
+    hn = str(checkpoints["handsnet"])
+    png = tmp_path / "p.png"
+    # sample 33: a non-hand whose float and int8 probabilities differ (0.822 / 0.833)
+    base = ["predict", "--data", str(tiny_dataset), "--index", "33", "--png", str(png)]
+    for extra, message in (
+        (["--classifier", hn, "--calibration", str(tiny_dataset)], "add --int8"),
+        (["--segmenter", str(checkpoints["segnet"]), "--int8"], "give --classifier"),
+        (["--classifier", hn, "--int8", "--calibration", str(tmp_path / "nope")], "not found"),
+    ):
+        res = runner.invoke(app, base + extra)
+        assert res.exit_code == 2 and message in res.output, res.output
+        assert not png.exists()
+    res = runner.invoke(app, [*base, "--classifier", hn, "--int8"])
+    assert res.exit_code == 0, res.output
+    printed = float(res.output.split("(probability ")[1].split(")")[0])
+    # the reference: evaluate's int8 network (same calibration draw), run on the stored image
+    model, run = _trained(checkpoints)
+    q = quantize_int8(model, calibration_images(tiny_dataset, run, None))
+    sample = read_sample(tiny_dataset, 33)
+    x = _input_of(load_predictor(checkpoints["handsnet"]), sample.image)
+    with torch.no_grad():
+        ref = q(x)[0]
+    assert abs(printed - float(torch.softmax(ref, 0).max())) < 1e-4  # printed with 4 decimals
+    explicit = load_predictor(checkpoints["handsnet"], int8=True, calibration=tiny_dataset)
+    assert torch.equal(explicit.logits(sample.image), ref)
+
+
+def _input_of(predictor, image) -> torch.Tensor:
+    """(1, 1, h, w) network input of a stored (H, W) uint8 image (`learn.inputs.net_input`)."""
+    import numpy as np
+
+    from learn.inputs import net_input
+
+    arr = net_input(np.asarray(image, np.float32) / 255.0, predictor.input_size, predictor.task,
+                    predictor.canvas(1.0))  # fmt: skip
+    return torch.from_numpy(arr)[None, None]
