@@ -1,6 +1,6 @@
 """Labels of `handskin evaluate` report rows: a method's name, and what tells two rows of one
-method apart (input size, width, epochs, training precision, views and shifts, weight
-averaging, seed, training data, run folder).
+method apart (input size, width, initialisation, epochs, training precision, views and shifts,
+weight averaging, seed, training data, run folder).
 Used by the report's tables (`learn.eval_report`) and by the charts drawn from report JSON."""
 
 from __future__ import annotations
@@ -44,13 +44,14 @@ INT8_SUFFIX = " int8"
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `INT8_SUFFIX` for an
     int8 network and `TTA_SUFFIX` for test-time flips); where two rows would share a label, the
-    input size, then the width multiplier, the training epochs, the training precision, the
-    training views, the weight averaging, the seed (each when theirs differ), then the training
-    data, then the run folder, added."""
+    input size, then the width multiplier, the initialisation, the training epochs, the
+    training precision, the training views, the weight averaging, the seed (each when theirs
+    differ), then the training data, then the run folder, added."""
     labels = [method_label(r) + (INT8_SUFFIX if r.get("int8") else "")
               + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]  # fmt: skip
     for extra, only_if_differs in ((size_label, True),
                                    (lambda r: width_label(r) or "default width", True),
+                                   (init_label, True),
                                    (epochs_label, True),
                                    (precision_label, True),
                                    (views_label, True),
@@ -126,6 +127,15 @@ def averaging_label(r: dict) -> str:
     (`learn.config.TrainConfig.ema_decay`; checkpoints from before it existed: none)."""
     decay = ((r.get("config") or {}).get("train") or {}).get("ema_decay") or 0.0
     return f"EMA {decay:g}" if decay else "no EMA"
+
+
+def init_label(r: dict) -> str:
+    """``from scratch`` (seeded random weights), ``from <run folder>`` (fine-tuned from that
+    run's checkpoint, ``handskin train --init``) or ``init unknown`` (not recorded)."""
+    init = r.get("init")
+    if init is None:
+        return "init unknown"
+    return "from scratch" if init == "random" else f"from {Path(str(init)).parent.name or init}"
 
 
 def width_label(r: dict) -> str | None:

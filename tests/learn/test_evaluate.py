@@ -274,6 +274,16 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     assert row_labels([s0, s1, *ema]) == [
         "SegNet, no EMA, seed 0", "SegNet, no EMA, seed 1", "SegNet, EMA 0.998, seed 0",
         "SegNet, EMA 0.998, seed 1"]  # fmt: skip
+    # fine-tuned from another run's checkpoint: its run folder, before the epochs (none
+    # recorded: said only where it differs)
+    scratch = [dict(long, init="random", train_data={"path": f"/d/{d}", "n_train": 9})
+               for d in ("paper_k", "x2_k")]  # fmt: skip
+    tuned = dict(short, init="/r/seg_x2_k/best.pt", checkpoint="/r/ft/best.pt")
+    assert row_labels([*scratch, tuned]) == [
+        "SegNet, from scratch, paper_k (9 train)", "SegNet, from scratch, x2_k (9 train)",
+        "SegNet, from seg_x2_k"]  # fmt: skip
+    assert row_labels([dict(long, init=None), tuned]) == ["SegNet, init unknown",
+                                                          "SegNet, from seg_x2_k"]  # fmt: skip
     assert "bfloat16" in _init_text(dict(bf16, init="random"))
     assert "bfloat16" not in _init_text(dict(long, init="random"))
     # ensembles: a repeated method is counted, and seed replicates name their seeds
