@@ -84,8 +84,8 @@ def traceable_body(model: nn.Module) -> nn.Module:
     if type(model).__name__ != "HandsNet":
         raise ConfigError(f"int8 inference covers HandsNet, the real-time classifier; got "
                           f"{type(model).__name__} (the VGG16 encoder's pooling returns indices, "
-                          "which FX quantization cannot observe). Fix: evaluate it without "
-                          "--int8")  # fmt: skip
+                          "which FX quantization cannot observe). Fix: score or run it "
+                          "without --int8")  # fmt: skip
     return nn.Sequential(model.features, model.classifier)
 
 
@@ -148,13 +148,13 @@ def int8_from_checkpoint(model: nn.Module, run, ckpt: dict,
     read, for another network or when that data is not on this machine."""
     traceable_body(model)
     recorded = (ckpt.get("data") or {}).get("path")
-    where = Path(calibration) if calibration is not None else recorded and Path(recorded)
+    where = Path(calibration) if calibration is not None else Path(recorded) if recorded else None
     if where is None or not where.exists():
-        what = f"--calibration {calibration}" if calibration is not None else (
-            f"the checkpoint's training data {recorded}" if recorded else "no training data path "
-            "in the checkpoint")  # fmt: skip
-        raise ConfigError(f"int8 needs training images to set its activation ranges; {what}: "
-                          "not found. Fix: pass --calibration DATASET (a dataset or image folder "
-                          "of the same skin; its train split is used)")  # fmt: skip
+        what = (f"--calibration {calibration} was not found" if calibration is not None else
+                f"the checkpoint's training data {recorded} is not here" if recorded else
+                "the checkpoint does not say what it was trained on")  # fmt: skip
+        raise ConfigError(f"int8 needs training images to set its activation ranges; {what}. "
+                          "Fix: pass --calibration DATASET (a dataset or image folder of the "
+                          "same skin; its train split is used)")  # fmt: skip
     hand = (ckpt.get("data") or {}).get("hand_classes")
     return quantize_int8(model, calibration_images(where, run, hand and tuple(hand)))

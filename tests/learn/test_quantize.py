@@ -148,10 +148,16 @@ def test_predict_int8(checkpoints, tiny_dataset, tmp_path):
         (["--classifier", hn, "--calibration", str(tiny_dataset)], "add --int8"),
         (["--segmenter", str(checkpoints["segnet"]), "--int8"], "give --classifier"),
         (["--classifier", hn, "--int8", "--calibration", str(tmp_path / "nope")], "not found"),
+        (["--classifier", str(checkpoints["segnet"]), "--int8"], "covers HandsNet"),
     ):
         res = runner.invoke(app, base + extra)
         assert res.exit_code == 2 and message in res.output, res.output
         assert not png.exists()
+    moved = load_checkpoint(checkpoints["handsnet"])  # trained on data no longer on this machine
+    moved["data"] = {**moved["data"], "path": str(tmp_path / "gone")}
+    torch.save(moved, tmp_path / "moved.pt")
+    res = runner.invoke(app, [*base, "--classifier", str(tmp_path / "moved.pt"), "--int8"])
+    assert res.exit_code == 2 and "is not here" in res.output and not png.exists(), res.output
     res = runner.invoke(app, [*base, "--classifier", hn, "--int8"])
     assert res.exit_code == 0, res.output
     printed = float(res.output.split("(probability ")[1].split(")")[0])
