@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import platform
+import warnings
 from collections.abc import Mapping
 from importlib import metadata
 from pathlib import Path
@@ -95,10 +96,17 @@ def save_checkpoint(ckpt: Mapping[str, object], path: str | Path) -> Path:
     return path
 
 
-def model_from_checkpoint(ckpt: Mapping) -> tuple[nn.Module, object]:
-    """The trained model (eval mode) and the ``learn.train.RunConfig`` of a checkpoint dict."""
+def model_from_checkpoint(ckpt: Mapping, int8_ok: bool = False) -> tuple[nn.Module, object]:
+    """The trained model (eval mode) and the ``learn.train.RunConfig`` of a checkpoint dict.
+    An int8 file (``handskin quantize``) is refused with a ConfigError unless ``int8_ok`` (the
+    caller runs its saved int8 network, `learn.int8_file`; the model returned is its float
+    HandsNet)."""
+    from learn.int8_file import refuse_int8
     from learn.models import create_model
     from learn.train import run_from_dict
+
+    if not int8_ok:
+        refuse_int8(ckpt, "a checkpoint given", "this command runs float networks")
 
     run = run_from_dict(ckpt["config"])
     check_inputs(ckpt, run.task)
@@ -130,7 +138,9 @@ def load_checkpoint(path: str | Path) -> dict[str, object]:
     if not path.is_file():
         raise DataError(f"no checkpoint at {path}. Fix: give a .pt file written by handskin train")
     try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():  # an int8 file's quantized tensors: torch's deprecations
+            warnings.filterwarnings("ignore", ".*(TypedStorage|quantized tensor creation)")
+            ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:  # unpickling errors come in many types
         raise DataError(f"{path} is not a readable checkpoint ({err})") from err
     missing = [k for k in REQUIRED_KEYS if not isinstance(ckpt, Mapping) or k not in ckpt]

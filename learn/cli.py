@@ -293,12 +293,17 @@ def evaluate_command(
 def _int8_jobs(checkpoints: list[Path]) -> list[tuple[Path, bool, bool]]:
     """``--int8``'s jobs: every HandsNet among the checkpoints; a ConfigError if none is."""
     from learn.checkpoint import load_checkpoint
+    from learn.int8_file import is_int8
 
-    nets = [c for c in checkpoints if c.suffix != ".npz"
-            and load_checkpoint(c)["config"]["model"]["arch"] == "handsnet"]  # fmt: skip
+    ckpts = {c: load_checkpoint(c) for c in checkpoints if c.suffix != ".npz"}
+    nets = [c for c, k in ckpts.items()
+            if k["config"]["model"]["arch"] == "handsnet" and not is_int8(k)]  # fmt: skip
     if not nets:
-        raise ConfigError("--int8 scores HandsNet as an int8 network; no HandsNet checkpoint "
-                          "was given. Fix: add a HandsNet .pt file, or drop --int8")  # fmt: skip
+        saved = any(is_int8(k) for k in ckpts.values())
+        raise ConfigError("--int8 scores HandsNet as an int8 network; no float HandsNet "
+                          "checkpoint was given" + (" (int8 files of handskin quantize are "
+                          "scored as int8 without it)" if saved else "") + ". Fix: add a "
+                          "HandsNet .pt file, or drop --int8")  # fmt: skip
     return [(c, False, True) for c in nets]
 
 
@@ -336,9 +341,11 @@ def _needs_torch(command):
 
 
 def register(app: typer.Typer) -> None:
-    """Add `train`, `evaluate` and `predict` to the `handskin` app."""
+    """Add `train`, `evaluate`, `predict` and `quantize` to the `handskin` app."""
     app.command("train")(_needs_torch(train_command))
     app.command("evaluate")(_needs_torch(evaluate_command))
     from learn.predict_cli import predict_command
+    from learn.quantize_cli import quantize_command
 
     app.command("predict")(_needs_torch(predict_command))
+    app.command("quantize")(_needs_torch(quantize_command))

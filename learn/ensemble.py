@@ -88,14 +88,18 @@ def check_members(members: Sequence[Member]) -> None:
                     "task, classes, input size and canvas")  # fmt: skip
 
 
-def load_members(paths: Sequence[str | Path]) -> list[Member]:
-    """The checkpoints of an ensemble, loaded and checked alike (`check_members`)."""
+def load_members(paths: Sequence[str | Path], int8_ok: bool = False) -> list[Member]:
+    """The checkpoints of an ensemble, loaded and checked alike (`check_members`); int8 files
+    refused unless ``int8_ok`` (`learn.checkpoint.model_from_checkpoint`)."""
     from learn.checkpoint import load_checkpoint, model_from_checkpoint
+    from learn.int8_file import refuse_int8
 
     members = []
     for p in paths:
         ckpt = load_checkpoint(p)
-        model, run = model_from_checkpoint(ckpt)
+        if not int8_ok:
+            refuse_int8(ckpt, p, "an ensemble averages float networks")
+        model, run = model_from_checkpoint(ckpt, int8_ok=True)
         members.append(Member(Path(p), ckpt, model, run))
     check_members(members)
     return members

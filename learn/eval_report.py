@@ -125,8 +125,11 @@ def _timing(r: dict) -> str:
     if r.get("timing"):  # a classical model: one path, image to label
         return head + f"{_fmt(ms['fast'])} ({r['timing']})"
     if q := r.get("int8"):  # one path: the int8 network
+        saved = (f" of {Path(q['calibration_data']).name}, saved by handskin quantize"
+                 if q.get("saved") else "")  # fmt: skip
         return head + (f"{_fmt(ms['fast'])}, int8 ({q['backend']}; activation ranges from "
-                       f"{q['calibration_images']} images of the {q['calibration_split']} split)")
+                       f"{q['calibration_images']} images of the {q['calibration_split']} "
+                       f"split{saved})")
     gpu = "none (no CUDA)" if ms["gpu"] is None else _fmt(ms["gpu"])
     return (head + f"eval mode {_fmt(ms['eval_mode'])}, prepared (BN folded) "
             f"{_fmt(ms['prepared'])}, fast path {_fmt(ms['fast'])} "

@@ -212,7 +212,8 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     a JSON-able dict (one row of the report). ``tta``: every path, timing included, runs with
     test-time flips over the views the network was trained on (`learn.tta.FlipTTA`). ``int8``
     (HandsNet only): scores, breakdowns and timing are of its int8 copy (`learn.quantize`),
-    calibrated on training images of ``data_path``."""
+    calibrated on training images of ``data_path``; an int8 file (``handskin quantize``,
+    `learn.int8_file`) is scored as its saved int8 network, ``int8`` or not."""
     from learn.checkpoint import load_checkpoint, model_from_checkpoint
     from learn.ensemble import Member
 
@@ -221,10 +222,12 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
 
         return evaluate_classical(ckpt_path, data_path, hand_classes=hand_classes,
                                   threads=threads, time_runs=time_runs)  # fmt: skip
+    from learn.int8_file import is_int8
+
     ckpt = load_checkpoint(ckpt_path)
-    model, run = model_from_checkpoint(ckpt)
+    model, run = model_from_checkpoint(ckpt, int8_ok=True)
     return _evaluate_members([Member(Path(ckpt_path), ckpt, model, run)], data_path,
-                             hand_classes, threads, time_runs, tta, int8)  # fmt: skip
+                             hand_classes, threads, time_runs, tta, int8 or is_int8(ckpt))
 
 
 def evaluate_ensemble(ckpt_paths: list[str | Path], data_path: str | Path, *,
@@ -277,13 +280,11 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     n_cls = run.model.num_classes
     on_dataset = is_dataset(data_path)
     classify_data = run.task == "classify" and on_dataset
-    calib = None
     if int8:  # a ConfigError for another network; calibrated on training images, not test
-        from learn.quantize import BACKEND, calibration_images, quantize_int8, traceable_body
+        from learn.quantize import int8_with_note
 
-        traceable_body(first.model)
-        calib = calibration_images(Path(data_path), run, hand)
-    model = build((lambda m: quantize_int8(m, calib)) if int8 else (lambda m: m))
+        q8, int8_note = int8_with_note(first.model, run, ckpt, Path(data_path), hand)
+    model = build((lambda m: q8) if int8 else (lambda m: m))
     ref = evaluate_tensors(model, test, n_cls, keep_predictions=on_dataset)
     seg_groups = worst = miou_interval = groups = None
     if on_dataset:  # each test sample's subject / object instance, for intervals over them
@@ -343,9 +344,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "test_indices": None if groups is None else [int(i) for i in split.indices],
            "test_groups": None if groups is None else groups.tolist(),
            "tta_views": views and views[0],
-           "int8": None if calib is None else {
-               "backend": BACKEND, "calibration_images": len(calib),
-               "calibration_split": "train"}}  # fmt: skip
+           "int8": int8_note if int8 else None}  # fmt: skip
     return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
 
 

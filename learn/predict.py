@@ -28,6 +28,7 @@ from learn.checkpoint import load_checkpoint
 from learn.evaluate import fast_inference, tta_views
 from learn.folder import is_dataset, read_grey
 from learn.inputs import input_canvas, labels_on_map, net_input
+from learn.int8_file import is_int8
 from learn.quantize import int8_from_checkpoint
 from learn.tta import FlipTTA
 from tactile.dataset.reader import DatasetReader
@@ -72,19 +73,20 @@ def load_predictor(
     (`learn.ensemble.MeanSoftmax`: the log of the mean of their softmax outputs), checked
     alike (task, classes, input size) before any work. ``int8`` (HandsNet only): each network
     as its 8-bit copy, calibrated on the train split of ``calibration`` or of the data it was
-    trained on (`learn.quantize.int8_from_checkpoint`)."""
+    trained on (`learn.quantize.int8_from_checkpoint`). An int8 file (``handskin quantize``)
+    always runs as its saved int8 network."""
     from learn.checkpoint import model_from_checkpoint
     from learn.ensemble import MeanSoftmax, load_members
 
     if isinstance(path, str | Path):
         ckpt = load_checkpoint(path)
-        model, run = model_from_checkpoint(ckpt)
+        model, run = model_from_checkpoint(ckpt, int8_ok=True)
         members = [(Path(path), ckpt, model, run)]
     else:
-        members = [(m.path, m.ckpt, m.model, m.run) for m in load_members(path)]
+        members = [(m.path, m.ckpt, m.model, m.run) for m in load_members(path, int8_ok=True)]
     nets = []
     for where, ckpt, model, run in members:
-        fast = (int8_from_checkpoint(model, run, ckpt, calibration) if int8
+        fast = (int8_from_checkpoint(model, run, ckpt, calibration) if int8 or is_int8(ckpt)
                 else fast_inference(model))  # fmt: skip
         nets.append(FlipTTA(fast, tta_views(run, where)) if tta else fast)
     _, ckpt, _, run = members[0]

@@ -94,8 +94,6 @@ def quantize_int8(model: nn.Module, calibration: torch.Tensor) -> Int8Classifier
     ``calibration`` (N, C, H, W) float images in [0, 1] (training images, N ≥ 16; the test split
     must not be used). ``model`` is not modified. ConfigError, before any work, for another network,
     too few or non-finite calibration images, or a PyTorch without the oneDNN engine."""
-    from torch.ao.quantization import get_default_qconfig_mapping
-    from torch.ao.quantization.quantize_fx import convert_fx, prepare_fx
 
     body = traceable_body(model)
     if calibration.ndim != 4 or len(calibration) < MIN_CALIBRATION:
@@ -109,6 +107,14 @@ def quantize_int8(model: nn.Module, calibration: torch.Tensor) -> Int8Classifier
         raise ConfigError(f"this PyTorch build has no {BACKEND} quantized engine (it has "
                           f"{torch.backends.quantized.supported_engines}). Fix: evaluate "
                           "without --int8")  # fmt: skip
+    return Int8Classifier(_observed_and_converted(body, calibration), model).eval()
+
+
+def _observed_and_converted(body: nn.Module, calibration: torch.Tensor) -> nn.Module:
+    """FX-quantized copy of ``body``, its activation ranges observed on ``calibration``."""
+    from torch.ao.quantization import get_default_qconfig_mapping
+    from torch.ao.quantization.quantize_fx import convert_fx, prepare_fx
+
     body = copy.deepcopy(body).eval()
     with quantized_engine(), warnings.catch_warnings():
         # FX graph mode is deprecated in favour of torchao's pt2e flow, whose CPU int8 speed
@@ -118,8 +124,26 @@ def quantize_int8(model: nn.Module, calibration: torch.Tensor) -> Int8Classifier
         with torch.no_grad():
             for batch in calibration.split(CALIBRATION_BATCH):
                 prepared(batch.float())
-        quantized = convert_fx(prepared)
-    return Int8Classifier(quantized, model).eval()
+        return convert_fx(prepared)
+
+
+def int8_skeleton(model: nn.Module) -> Int8Classifier:
+    """An int8 network of ``model``'s architecture whose weights and ranges are placeholders,
+    to be overwritten by `load_int8_state` (the quantized graph depends on the architecture
+    only, not on the calibration images)."""
+    body = traceable_body(model)
+    h, w = getattr(model, "input_size", None) or (68, 100)
+    ramp = torch.linspace(0, 1, h * w).reshape(1, 1, h, w).repeat(2, model.in_channels, 1, 1)
+    return Int8Classifier(_observed_and_converted(body, ramp), model).eval()
+
+
+def load_int8_state(net: Int8Classifier, state: dict) -> Int8Classifier:
+    """``net`` with the weights and activation ranges of ``state`` (``net.state_dict()`` of an
+    int8 network of the same architecture). The weights are repacked under the oneDNN engine,
+    as `quantize_int8` packs them, so the loaded network computes the same bits."""
+    with quantized_engine():
+        net.load_state_dict(state, strict=True)
+    return net.eval()
 
 
 #: Calibration images drawn from the training split by `calibration_images` (count).
@@ -139,14 +163,10 @@ def calibration_images(data_path, run, hand_classes: tuple[str, ...] | None,
     return materialize(torch.utils.data.Subset(split, pick.tolist()), "int8 calibration").x
 
 
-def int8_from_checkpoint(model: nn.Module, run, ckpt: dict,
-                         calibration: str | Path | None = None) -> Int8Classifier:  # fmt: skip
-    """The int8 copy of a checkpoint's HandsNet ``model`` (``run``: its `RunConfig`, both from
-    `learn.checkpoint.model_from_checkpoint`), calibrated on `N_CALIBRATION` images
-    of the train split of ``calibration`` (a dataset or image folder) or, if None, of the data
-    the checkpoint was trained on (``ckpt["data"]["path"]``). ConfigError, before the images are
-    read, for another network or when that data is not on this machine."""
-    traceable_body(model)
+def calibration_source(ckpt: dict, calibration: str | Path | None = None) -> Path:
+    """Where a checkpoint's int8 copy takes its calibration images: ``calibration`` (a dataset
+    or image folder) or, if None, the data it was trained on (``ckpt["data"]["path"]``).
+    ConfigError naming the fix when that is not on this machine."""
     recorded = (ckpt.get("data") or {}).get("path")
     where = Path(calibration) if calibration is not None else Path(recorded) if recorded else None
     if where is None or not where.exists():
@@ -156,5 +176,45 @@ def int8_from_checkpoint(model: nn.Module, run, ckpt: dict,
         raise ConfigError(f"int8 needs training images to set its activation ranges; {what}. "
                           "Fix: pass --calibration DATASET (a dataset or image folder of the "
                           "same skin; its train split is used)")  # fmt: skip
-    hand = (ckpt.get("data") or {}).get("hand_classes")
-    return quantize_int8(model, calibration_images(where, run, hand and tuple(hand)))
+    return where
+
+
+def int8_from_checkpoint(model: nn.Module, run, ckpt: dict,
+                         calibration: str | Path | None = None) -> Int8Classifier:  # fmt: skip
+    """The int8 copy of a checkpoint's HandsNet ``model`` (``run``: its `RunConfig`, both from
+    `learn.checkpoint.model_from_checkpoint`), calibrated on `N_CALIBRATION` images
+    of the train split of `calibration_source`. An int8 file (``handskin quantize``,
+    `learn.int8_file`) gives its saved network, calibrated when it was written. ConfigError,
+    before the images are read, for another network, when the calibration data is not on this
+    machine, or for ``calibration`` given with an int8 file."""
+    from learn.int8_file import INT8_KEY, is_int8
+
+    if is_int8(ckpt) and calibration is not None:
+        raise ConfigError("--calibration: this classifier is an int8 file, calibrated on "
+                          f"{ckpt[INT8_KEY]['calibration']['data']} when it was written. "
+                          "Fix: drop --calibration, or quantize its float checkpoint again "
+                          "with handskin quantize --calibration")  # fmt: skip
+    return int8_with_note(model, run, ckpt, calibration)[0]
+
+
+def int8_with_note(
+    model: nn.Module,
+    run,
+    ckpt: dict,
+    calibration: str | Path | None = None,
+    hand_classes: tuple[str, ...] | None = None,
+) -> tuple[Int8Classifier, dict]:
+    """`int8_from_checkpoint` and what a report says of its calibration (JSON-able: backend,
+    image count, split; for an int8 file also its data and ``saved``). An int8 file gives its
+    saved network and ``calibration`` is not read. ``hand_classes``: of an image folder
+    (default: the checkpoint's)."""
+    traceable_body(model)
+    from learn.int8_file import calibration_note, int8_from_saved, is_int8
+
+    if is_int8(ckpt):  # calibrated when it was written; ``calibration`` is not read
+        return int8_from_saved(model, ckpt), calibration_note(ckpt)
+    where = calibration_source(ckpt, calibration)
+    hand = hand_classes or (ckpt.get("data") or {}).get("hand_classes")
+    calib = calibration_images(where, run, hand and tuple(hand))
+    note = {"backend": BACKEND, "calibration_images": len(calib), "calibration_split": "train"}
+    return quantize_int8(model, calib), note

@@ -111,7 +111,7 @@ def test_evaluate_int8_row(checkpoints, tiny_dataset, tmp_path):
     md = tmp_path / "r.md"
     res = runner.invoke(app, ["evaluate", str(checkpoints["segnet"]), "--data", str(tiny_dataset),
                               "--report", str(md), "--int8"])  # fmt: skip
-    assert res.exit_code == 2 and "no HandsNet checkpoint" in res.output, res.output
+    assert res.exit_code == 2 and "no float HandsNet checkpoint" in res.output, res.output
     assert not md.exists()
     res = runner.invoke(app, ["evaluate", str(checkpoints["handsnet"]), "--data",
                               str(tiny_dataset), "--report", str(md), "--int8"])  # fmt: skip
