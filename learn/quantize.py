@@ -94,7 +94,6 @@ def quantize_int8(model: nn.Module, calibration: torch.Tensor) -> Int8Classifier
     ``calibration`` (N, C, H, W) float images in [0, 1] (training images, N ≥ 16; the test split
     must not be used). ``model`` is not modified. ConfigError, before any work, for another network,
     too few or non-finite calibration images, or a PyTorch without the oneDNN engine."""
-
     body = traceable_body(model)
     if calibration.ndim != 4 or len(calibration) < MIN_CALIBRATION:
         raise ConfigError(f"int8 calibration needs at least {MIN_CALIBRATION} images (N, C, H, W); "
