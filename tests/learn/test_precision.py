@@ -138,3 +138,22 @@ def test_resume_refuses_another_precision(tiny_dataset, tiny_run, tmp_path, monk
     with pytest.raises(ConfigError, match="another configuration"):
         fit(dataclasses.replace(run, precision="bf16"), data, tmp_path / "cut", resume=True,
             progress=False)  # fmt: skip
+
+
+def test_bf16_support_means_native_bf16_on_x86():
+    """On x86, oneDNN accepts bfloat16 on any AVX-512 CPU and emulates it (slower than float32);
+    bf16 is used only with the CPU flags of native bfloat16, read here from the kernel."""
+    import platform
+    from pathlib import Path
+
+    from learn.evaluate import bf16_supported
+
+    cpuinfo = Path("/proc/cpuinfo")
+    if platform.machine().lower() not in ("x86_64", "amd64") or not cpuinfo.exists():
+        pytest.skip("needs an x86 Linux machine (/proc/cpuinfo flags)")
+    flags = set()
+    for line in cpuinfo.read_text().splitlines():
+        if line.startswith("flags"):
+            flags |= set(line.split(":", 1)[1].split())
+    native = bool(flags & {"avx512_bf16", "amx_bf16"})
+    assert bf16_supported() == (native and bool(torch.ops.mkldnn._is_mkldnn_bf16_supported()))
