@@ -109,31 +109,62 @@ def quantize_int8(model: nn.Module, calibration: torch.Tensor) -> Int8Classifier
     return Int8Classifier(_observed_and_converted(body, calibration), model).eval()
 
 
-def _observed_and_converted(body: nn.Module, calibration: torch.Tensor) -> nn.Module:
-    """FX-quantized copy of ``body``, its activation ranges observed on ``calibration``."""
+@contextlib.contextmanager
+def _no_fx_stack_traces() -> Iterator[None]:
+    """Skip FX's per-node Python stack traces while tracing (``torch.fx.config``): symbolizing
+    them imports much of torch on first use, seconds per process, for debugging text only."""
+    import torch.fx.config as fx_config
+
+    before = fx_config.do_not_emit_stack_traces
+    fx_config.do_not_emit_stack_traces = True
+    try:
+        yield
+    finally:
+        fx_config.do_not_emit_stack_traces = before
+
+
+def _observed_and_converted(body: nn.Module, calibration: torch.Tensor,
+                            qconfig_mapping=None) -> nn.Module:  # fmt: skip
+    """FX-quantized copy of ``body``, its activation ranges observed on ``calibration``
+    (``qconfig_mapping``: the backend's default, histogram observers, when None)."""
     from torch.ao.quantization import get_default_qconfig_mapping
     from torch.ao.quantization.quantize_fx import convert_fx, prepare_fx
 
     body = copy.deepcopy(body).eval()
-    with quantized_engine(), warnings.catch_warnings():
+    mapping = qconfig_mapping or get_default_qconfig_mapping(BACKEND)
+    with quantized_engine(), _no_fx_stack_traces(), warnings.catch_warnings():
         # FX graph mode is deprecated in favour of torchao's pt2e flow, whose CPU int8 speed
         # needs torch.compile; the FX path runs eagerly with the same oneDNN kernels.
         warnings.simplefilter("ignore", (DeprecationWarning, FutureWarning, UserWarning))
-        prepared = prepare_fx(body, get_default_qconfig_mapping(BACKEND), (calibration[:1],))
+        prepared = prepare_fx(body, mapping, (calibration[:1],))
         with torch.no_grad():
             for batch in calibration.split(CALIBRATION_BATCH):
                 prepared(batch.float())
         return convert_fx(prepared)
 
 
+def _skeleton_qconfig_mapping():
+    """The backend's default mapping with a min/max global activation observer: the same
+    quantized graph, dtypes and schemes as its histogram observer gives, without the range
+    search (seconds per process), for a network whose ranges `load_int8_state` overwrites.
+    HandsNet's layers all take the global entry."""
+    from torch.ao.quantization import QConfig, get_default_qconfig, get_default_qconfig_mapping
+    from torch.ao.quantization.observer import MinMaxObserver
+
+    weight = get_default_qconfig(BACKEND).weight
+    fast = QConfig(activation=MinMaxObserver.with_args(reduce_range=False), weight=weight)
+    return get_default_qconfig_mapping(BACKEND).set_global(fast)
+
+
 def int8_skeleton(model: nn.Module) -> Int8Classifier:
     """An int8 network of ``model``'s architecture whose weights and ranges are placeholders,
     to be overwritten by `load_int8_state` (the quantized graph depends on the architecture
-    only, not on the calibration images)."""
+    only, not on the calibration images or the activation observer)."""
     body = traceable_body(model)
     h, w = getattr(model, "input_size", None) or (68, 100)
     ramp = torch.linspace(0, 1, h * w).reshape(1, 1, h, w).repeat(2, model.in_channels, 1, 1)
-    return Int8Classifier(_observed_and_converted(body, ramp), model).eval()
+    net = _observed_and_converted(body, ramp, _skeleton_qconfig_mapping())
+    return Int8Classifier(net, model).eval()
 
 
 def load_int8_state(net: Int8Classifier, state: dict) -> Int8Classifier:
