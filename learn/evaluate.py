@@ -108,6 +108,10 @@ class FastInference(nn.Module):
         return self.net(x.to(dtype).contiguous(memory_format=torch.channels_last)).float()
 
 
+#: `platform.machine()` names of x86 CPUs (lower case).
+_X86 = ("x86_64", "amd64", "i386", "i686")
+
+
 def bf16_supported() -> bool:
     """True when this CPU has native bfloat16 arithmetic for oneDNN: on x86, AVX512-BF16 or AMX;
     elsewhere, what oneDNN reports. On an x86 CPU with AVX-512 but neither, oneDNN still accepts
@@ -121,9 +125,6 @@ def bf16_supported() -> bool:
         return True
     except (AttributeError, RuntimeError):
         return False
-
-
-_X86 = ("x86_64", "amd64", "i386", "i686")
 
 
 def agreement(a: nn.Module, b: nn.Module, x: torch.Tensor) -> float:
