@@ -108,15 +108,12 @@ class FastInference(nn.Module):
         return self.net(x.to(dtype).contiguous(memory_format=torch.channels_last)).float()
 
 
-#: `platform.machine()` names of x86 CPUs (lower case).
 _X86 = ("x86_64", "amd64", "i386", "i686")
 
 
 def bf16_supported() -> bool:
-    """True when this CPU has native bfloat16 arithmetic for oneDNN: on x86, AVX512-BF16 or AMX;
-    elsewhere, what oneDNN reports. On an x86 CPU with AVX-512 but neither, oneDNN still accepts
-    bfloat16 and emulates it, about 3x slower than float32 for HandsNet (11.6 against 3.7 ms on
-    a Xeon with AVX-512 and VNNI), so that counts as no support."""
+    """True when this CPU has native bfloat16 for oneDNN: on x86, AVX512-BF16 or AMX (with AVX-512
+    alone oneDNN emulates it, 3x slower than fp32 for HandsNet); elsewhere, as oneDNN says."""
     try:
         if not torch.ops.mkldnn._is_mkldnn_bf16_supported():
             return False
