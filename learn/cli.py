@@ -73,6 +73,15 @@ def _check_data(data: Path) -> None:
         )
 
 
+def _refuse_repeats(checkpoints: list[Path]) -> None:
+    """A ConfigError when one file is given twice (its rows would be scored twice)."""
+    seen: set[Path] = set()
+    for c in checkpoints:
+        if c.resolve() in seen:
+            raise ConfigError(f"{c} is given twice. Fix: give each checkpoint or model file once")
+        seen.add(c.resolve())
+
+
 def _fit_classes(run, data):
     """Classification on a folder keeping every class: num_classes follows the folders."""
     n = len(data.class_names)
@@ -256,6 +265,7 @@ def evaluate_command(
 
     try:
         _check_data(data)
+        _refuse_repeats(checkpoints)
         jobs = []  # (checkpoint or list of them, with test-time flips, as int8)
         by_task: dict[str, list[Path]] = {}
         for c in checkpoints:

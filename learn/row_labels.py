@@ -46,7 +46,9 @@ def row_labels(rows: list[dict]) -> list[str]:
     int8 network and `TTA_SUFFIX` for test-time flips); where two rows would share a label, the
     input size, then the width multiplier, the initialisation, the training epochs, the
     training precision, the training views, the weight averaging, the seed (each when theirs
-    differ), then the training data, then the run folder, added."""
+    differ), then the training data, then the run folder, then the file's name (``best.pt``,
+    ``best_int8.pt``, ...; when theirs differ), added. Labels are unique: rows still alike are
+    numbered (``#2``, ...), so a report never merges two of them."""
     labels = [method_label(r) + (INT8_SUFFIX if r.get("int8") else "")
               + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]  # fmt: skip
     for extra, only_if_differs in ((size_label, True),
@@ -58,7 +60,8 @@ def row_labels(rows: list[dict]) -> list[str]:
                                    (averaging_label, True),
                                    (lambda r: f"seed {r.get('seed')}", True),
                                    (data_name, False),
-                                   (lambda r: Path(r["checkpoint"]).parent.name, False)):
+                                   (lambda r: Path(r["checkpoint"]).parent.name, False),
+                                   (lambda r: Path(r["checkpoint"]).name, True)):
         groups: dict[str, set[str]] = {}
         for lab, r in zip(labels, rows, strict=True):
             groups.setdefault(lab, set()).add(extra(r))
@@ -66,6 +69,10 @@ def row_labels(rows: list[dict]) -> list[str]:
                and (len(groups[lab]) > 1 or not only_if_differs)}  # fmt: skip
         labels = [f"{lab}, {extra(r)}" if lab in dup else lab
                   for lab, r in zip(labels, rows, strict=True)]  # fmt: skip
+    seen: Counter[str] = Counter()
+    for i, lab in enumerate(labels):
+        seen[lab] += 1
+        labels[i] = lab if seen[lab] == 1 else f"{lab} #{seen[lab]}"
     return labels
 
 

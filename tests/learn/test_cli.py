@@ -98,6 +98,8 @@ def test_canvas_option_reaches_the_checkpoint(app, tiny_dataset, small_config, t
         (["train", "{data}", "--out", "{out}", "--arch", "resnet"], "unknown arch 'resnet'"),
         (["train", "{data}", "--out", "{out}", "--config", "{bad}"], "key 'train.learning_rate'"),
         (["evaluate", "{out}/none.pt", "--data", "{data}"], "no checkpoint"),
+        (["evaluate", "{bad}", "{out}/../bad.toml", "--data", "{data}"],
+         "is given twice"),
         (["train", "{data}", "--out", "{bad}"], "bad.toml is a file, not a folder"),
         (["train", "{data}", "--out", "{bad}/run", "--arch", "bovw"], "is a file, not a folder"),
         (["predict", "--frame", "{bad}"], "--frame with --map"),

@@ -86,3 +86,28 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
                              {"train_data": {"path": "/d/forearm", "n_train": 2113}}])
     assert data_name(two) == "hands9k (5,384 train) + forearm (2,113 train)"
     assert data_name(dict(ens, members=[two["members"][0]] * 2)) == "hands9k (5,384 train)"
+
+
+def test_rows_of_one_run_folder_keep_their_own_table_rows():
+    """Two files of one run folder (best.pt and last.pt; a HandsNet calibrated afresh and its
+    int8 file) are told apart by file name, and the same file twice is numbered, so Table 3
+    keeps every row instead of merging rows that share a label."""
+    from learn.eval_report import _table3
+    from learn.row_labels import row_labels
+
+    a = {"arch": "handsnet", "task": "classify", "config": {"model": {}},
+         "checkpoint": "/r/hn/best.pt", "train_data": {"path": "/d/paper", "n_train": 2479},
+         "tta_views": None, "metrics": {"accuracy": 0.9182}, "ms_per_image": {"fast": 3.49}}
+    last = dict(a, checkpoint="/r/hn/last.pt", metrics={"accuracy": 0.9144})
+    fresh = dict(a, int8={"backend": "onednn"}, metrics={"accuracy": 0.9201})
+    saved = dict(a, checkpoint="/r/hn/best_int8.pt", int8={"backend": "onednn", "saved": True},
+                 metrics={"accuracy": 0.9211})
+    rows = [a, last, fresh, saved]
+    labels = row_labels(rows)
+    assert len(set(labels)) == len(rows)
+    assert labels[1].endswith("last.pt") and labels[3].endswith("best_int8.pt")
+    table = "\n".join(_table3(rows))
+    for acc in ("91.82", "91.44", "92.01", "92.11"):
+        assert f"| {acc} |" in table, table
+    twice = row_labels([a, dict(a)])
+    assert len(set(twice)) == 2 and twice[1].endswith("#2")
