@@ -268,18 +268,20 @@ def evaluate_command(
         _refuse_repeats(checkpoints)
         jobs = []  # (checkpoint or list of them, with test-time flips, as int8)
         by_task: dict[str, list[Path]] = {}
+        loaded = {}  # each .pt file, read once
         for c in checkpoints:
             if c.suffix == ".npz":
                 load_npz(c)
                 jobs.append((c, False, False))
                 continue
-            run = run_from_dict(load_checkpoint(c)["config"])
+            loaded[c] = load_checkpoint(c)
+            run = run_from_dict(loaded[c]["config"])
             if tta:  # a network trained without flips fails here, before any work
                 tta_views(run, c)
             by_task.setdefault(run.task, []).append(c)
             jobs += [(c, False, False)] + ([(c, True, False)] if tta else [])
         jobs += _ensemble_jobs(by_task, tta) if ensemble else []
-        jobs += _int8_jobs(checkpoints) if int8 else []
+        jobs += _int8_jobs(loaded) if int8 else []
         hand = _hand_classes(hand_classes)
         rows = [evaluate_ensemble(c, data, hand_classes=hand, threads=threads, tta=t)
                 if isinstance(c, list) else
@@ -300,12 +302,11 @@ def evaluate_command(
     typer.echo(f"report written to {report}")
 
 
-def _int8_jobs(checkpoints: list[Path]) -> list[tuple[Path, bool, bool]]:
-    """``--int8``'s jobs: every HandsNet among the checkpoints; a ConfigError if none is."""
-    from learn.checkpoint import load_checkpoint
+def _int8_jobs(ckpts: dict[Path, dict]) -> list[tuple[Path, bool, bool]]:
+    """``--int8``'s jobs: every float HandsNet among the loaded ``.pt`` checkpoints (path ->
+    checkpoint dict); a ConfigError if none is."""
     from learn.int8_file import is_int8
 
-    ckpts = {c: load_checkpoint(c) for c in checkpoints if c.suffix != ".npz"}
     nets = [c for c, k in ckpts.items()
             if k["config"]["model"]["arch"] == "handsnet" and not is_int8(k)]  # fmt: skip
     if not nets:
