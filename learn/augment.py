@@ -4,7 +4,7 @@
 
 The idea: a print means much the same wherever it lands on the map, and ~1,000 training hands
 show each network few positions. Measured on the paper-sized forearm set at 8 px, it does not
-hold: HandsNet lost 2.85 points at seeds 0 and 1, SegNet 1.06 mIoU points (README, "Random
+hold: HandsNet lost 2.85 points at seeds 0 and 1, SegNet 1.06 mIoU points (docs/learning.md, "Random
 shifts"), so `RunConfig.shift_px` is 0 by default. Shifts come from torch's global generator,
 which `learn.train.train_epoch` seeds per epoch, so a run (and a resumed one) gets the same
 shifts on every machine.

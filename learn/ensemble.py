@@ -4,10 +4,10 @@
     net = MeanSoftmax([m.model for m in members])   # x (B, 1, h, w) → log of the mean softmax
 
 Averaging the class probabilities of networks that err in different places is the simplest
-ensemble; on our hand prints the FCN-16s and SegNet mean beats either network alone (README,
-"Ensembles"). The members must share the task, class names, class count, input channels and
-input size, since one input image goes to all of them; :func:`load_members` checks this before
-any work, naming the member that differs.
+ensemble; on our hand prints the FCN-16s and SegNet mean beats either network alone
+(docs/learning.md, "Ensembles"). The members must share the task, class names, class count,
+input channels and input size, since one input image goes to all of them; :func:`load_members`
+checks this before any work, naming the member that differs.
 """
 
 from __future__ import annotations

@@ -65,7 +65,8 @@ def test_bf16_gradients_follow_fp32(tiny_dataset, checkpoints):
     Not SegNet here: at the tests' width (0.125) and 4 epochs its per-layer gradients differ by
     much more (cosine 0.2-0.5 in the encoder; 1-3 % of the max-unpooling indices flip between
     near-equal maxima), against 0.986 overall on the paper-sized checkpoint (width 0.25, 30
-    epochs). Whether bf16 trains SegNet as well is a training run's question (README)."""
+    epochs). Whether bf16 trains SegNet as well is a training run's question (docs/learning.md,
+    "bfloat16 training")."""
     ckpt = load_checkpoint(checkpoints["handsnet"])
     run = T.run_from_dict(ckpt["config"])
     data = load_data(tiny_dataset, run).train
