@@ -30,7 +30,8 @@ def _hand_classes(text: str | None) -> tuple[str, ...] | None:
     return None if not text else tuple(t.strip() for t in text.split(",") if t.strip())
 
 
-RUN_KEYS = ("val_fraction", "precision")  # overrides of RunConfig itself, not of its train table
+# overrides of RunConfig itself, not of its train table
+RUN_KEYS = ("val_fraction", "precision", "device")
 
 
 def resolve_run(arch: str, config: Path | None, overrides: dict, test_c: bool):
@@ -113,6 +114,9 @@ ValOpt = _opt(float | None, "Share (0-1) of the train split's subjects held out 
 PrecisionOpt = _opt(str | None, "Number format of the training forward pass: fp32 (the preset) "
                     "or bf16 (bfloat16 autocast, weights and loss in fp32; about 1.8x faster "
                     "steps on CPUs with native bf16: AVX512-BF16 or AMX; no unit).")
+DeviceOpt = _opt(str | None, "Where the model trains: cpu (the default; the same seed gives the "
+                 "same weights) or cuda / cuda:N (a GPU, with a CUDA build of torch; for the "
+                 "full-width networks, e.g. width = 1.0 in a run TOML); no unit.")
 HandOpt = _opt(str | None, "Image folders: comma-separated folder names that are 'hand' "
                "(e.g. hand,finger); default: every folder its own class.")
 InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file); vgg_svm: the vgg16 "
@@ -143,6 +147,7 @@ def train_command(
     seed: SeedOpt = None,
     val_fraction: ValOpt = None,
     precision: PrecisionOpt = None,
+    device: DeviceOpt = None,
     hand_classes: HandOpt = None,
     init: InitOpt = None,
     test_c: TestCOpt = False,
@@ -161,7 +166,8 @@ def train_command(
             raise DataError(f"no checkpoint at {init}. Fix: give a .pt file from handskin train")
         if arch in CLASSICAL:
             unused = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction,
-                      "--precision": precision, "--test-c": test_c or None,
+                      "--precision": precision, "--device": device,
+                      "--test-c": test_c or None,
                       "--resume": resume or None, "--cv-grid": cv_grid,
                       "--stop-after-epoch": stop_after_epoch,
                       "--canvas-mm": canvas_mm}  # fmt: skip
@@ -169,7 +175,8 @@ def train_command(
                              epochs, unused, progress)  # fmt: skip
             return
         over = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "seed": seed,
-                "val_fraction": val_fraction, "precision": precision}  # fmt: skip
+                "val_fraction": val_fraction, "precision": precision,
+                "device": device}  # fmt: skip
         run = resolve_run(arch, config, over, test_c)
         if canvas_mm is not None:
             model = dataclasses.replace(run.model, canvas_mm=parse_canvas(canvas_mm))

@@ -10,6 +10,7 @@ writes it beside the paper's Tables 3 and 8).
 from __future__ import annotations
 
 import copy
+import itertools
 import math
 import platform
 from dataclasses import dataclass
@@ -48,11 +49,20 @@ class EvalResult:
         return M.percent_by_true_class(self.cm)
 
 
+def device_of(module: nn.Module) -> torch.device:
+    """The device of ``module``'s first parameter or buffer (the CPU when it has none)."""
+    first = next(itertools.chain(module.parameters(), module.buffers()), None)
+    return torch.device("cpu") if first is None else first.device
+
+
 def logits_of(model: nn.Module, x: torch.Tensor, batch_size: int = 64) -> torch.Tensor:
-    """Logits of ``x`` (S, 1, h, w) in eval mode under ``torch.no_grad``, batch by batch."""
+    """Float32 logits, on the CPU, of ``x`` (S, 1, h, w) in eval mode under ``torch.no_grad``,
+    batch by batch on the model's device (a GPU during a run with ``RunConfig.device``)."""
     model.eval()
+    dev = device_of(model)
     with torch.no_grad():
-        batches = [model(x[i : i + batch_size]).float() for i in range(0, len(x), batch_size)]
+        batches = [model(x[i : i + batch_size].to(dev)).float().cpu()
+                   for i in range(0, len(x), batch_size)]  # fmt: skip
     return torch.cat(batches)
 
 
@@ -81,8 +91,9 @@ def evaluate_tensors(
             preds.append(pred)
             conf += [out.softmax(1).amax(1)] if y.ndim == 1 else []
         if loss_fn is not None:
+            dev = device_of(loss_fn)  # where its class weights live
             with torch.no_grad():
-                losses.append(float(loss_fn(out, y)) * len(y))
+                losses.append(float(loss_fn(out.to(dev), y.to(dev))) * len(y))
     cm = torch.stack(cms).sum(0)
     loss = sum(losses) / len(data.y) if losses else float("nan")
     return EvalResult(cm, scores(cm), loss, torch.cat(preds) if preds else None,

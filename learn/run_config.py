@@ -10,6 +10,7 @@ written before a key existed loads with that key's default.
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,6 +52,10 @@ class RunConfig:
     # validation stay float32; needs a CPU with native bf16 (AVX512-BF16 / AMX, `check_precision`)
     precision: str = "fp32"
     eval_batch_size: int = 64  # images per evaluation forward pass
+    # where the model trains: "cpu" (bit-reproducible from the seed), or "cuda" / "cuda:N" for a
+    # GPU (a CUDA build of torch; cuDNN's kernels may differ in the last bits from run to run).
+    # Batches are drawn and augmented on the CPU either way, so both see the same images.
+    device: str = "cpu"
 
     def __post_init__(self) -> None:
         if self.model.arch not in TASK_OF_ARCH:
@@ -66,6 +71,11 @@ class RunConfig:
             )
         if self.patience_epochs < 0 or self.threads < 1 or self.eval_batch_size < 1:
             raise ConfigError("RunConfig: patience_epochs >= 0, threads >= 1, eval_batch_size >= 1")
+        if not re.fullmatch(r"cpu|cuda(:\d+)?", self.device):
+            raise ConfigError(
+                f"RunConfig.device {self.device!r} is not a training device. Fix: device = "
+                '"cpu" (the default), "cuda" or "cuda:N" (a GPU; --device)'
+            )
         if self.precision not in PRECISIONS:
             raise ConfigError(
                 f"RunConfig.precision {self.precision!r} is not one of {', '.join(PRECISIONS)}. "

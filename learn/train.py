@@ -106,7 +106,8 @@ def make_loss(run: RunConfig, train: TensorData) -> nn.Module:
 
 
 def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool):
-    """One epoch over a seeded permutation of (sample, view) pairs; returns the mean loss."""
+    """One epoch over a seeded permutation of (sample, view) pairs; returns the mean loss.
+    Batches are drawn and augmented on the CPU, then moved to ``run.device``."""
     torch.manual_seed(epoch_seed(run.train.seed, epoch))
     views = views_of(run)
     order = torch.randperm(len(data.y) * len(views))
@@ -116,6 +117,7 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
     for start in bar:
         x, y = get_batch(data, order[start : start + run.train.batch_size], views)
         x, y = random_shift(x, y, run.shift_px)
+        x, y = x.to(run.device), y.to(run.device)
         value = train_step(model, loss_fn, optimizer, x, y, run.task, run.precision)
         total += value * len(y)
         bar.set_postfix(loss=f"{value:.4f}")
@@ -127,12 +129,12 @@ def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task
     """One optimisation step on images ``x`` (B, 1, h, w) and targets ``y``; returns the loss.
 
     Classifiers get channels-last input (their weights are channels-last, see :func:`build`).
-    ``precision="bf16"`` runs the forward pass under bfloat16 autocast (`RunConfig.precision`);
-    the loss is taken on float32 logits.
+    ``precision="bf16"`` runs the forward pass under bfloat16 autocast (`RunConfig.precision`)
+    on the device of ``x``; the loss is taken on float32 logits.
     """
     if task == "classify":
         x = x.contiguous(memory_format=torch.channels_last)
-    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
+    with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
         out = model(x)
     loss = loss_fn(out.float(), y)
     optimizer.zero_grad(set_to_none=True)
@@ -141,9 +143,33 @@ def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task
     return loss.item()
 
 
+def check_device(run: RunConfig) -> None:
+    """Raise ConfigError when ``run.device`` names a GPU this torch cannot reach."""
+    if run.device == "cpu":
+        return
+    if not torch.cuda.is_available():
+        raise ConfigError(
+            f"device {run.device!r}: this torch ({torch.__version__}) sees no CUDA GPU. Fix: "
+            "--device cpu, or install a CUDA build of torch on a machine with an NVIDIA GPU"
+        )
+    index = torch.device(run.device).index or 0
+    if index >= torch.cuda.device_count():
+        n = torch.cuda.device_count()
+        raise ConfigError(f"device {run.device!r}: this machine has {n} GPU(s). Fix: give cuda:0 "
+                          f"to cuda:{n - 1}")  # fmt: skip
+
+
 def check_precision(run: RunConfig) -> None:
-    """Raise ConfigError when ``run.precision`` is "bf16" on a CPU without native bfloat16
-    kernels, where autocast would emulate them and train slower than float32."""
+    """Raise ConfigError when the run cannot train where and as asked: its device is absent
+    (:func:`check_device`), or ``run.precision`` is "bf16" on a CPU without native bfloat16
+    kernels (autocast would emulate them and train slower than float32) or on a GPU without
+    bfloat16."""
+    check_device(run)
+    if run.precision == "bf16" and run.device != "cpu":
+        if not torch.cuda.is_bf16_supported():
+            raise ConfigError(f"precision \"bf16\": GPU {run.device!r} has no bfloat16. "
+                              'Fix: precision = "fp32" (--precision fp32)')  # fmt: skip
+        return
     if run.precision == "bf16" and not bf16_supported():
         raise ConfigError(
             "precision \"bf16\" needs a CPU with native bfloat16 (AVX512-BF16 or AMX); this "
@@ -160,6 +186,7 @@ def build(run: RunConfig, init_from: str | Path | None = None):
         load_weights(model, load_checkpoint(init_from))
     if run.task == "classify":  # channels-last convs train ~20 % faster on CPU (oneDNN)
         model = model.to(memory_format=torch.channels_last)
+    model = model.to(run.device)  # before the optimizer, whose state follows the parameters
     optimizer = make_optimizer(model, run.train)
     return model, optimizer, make_scheduler(optimizer, run.train)
 
@@ -178,12 +205,13 @@ def _restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None):
         raise ConfigError(f"{out / LAST}: its configuration does not load ({err}); use a new "
                           "--out") from err  # fmt: skip
     mine = to_dict(run)
-    mine["train"] = {**mine["train"], "epochs": None}
-    theirs["train"] = {**theirs["train"], "epochs": None}
+    mine["train"] = {**mine["train"], "epochs": None}  # may change on resume: the schedule's
+    theirs["train"] = {**theirs["train"], "epochs": None}  # length, and where the run trains
+    mine["device"] = theirs["device"] = None
     if mine != theirs:
         raise ConfigError(
             f"{out / LAST} was trained with another configuration; resume with the same one "
-            "(only train.epochs may change) or use a new --out"
+            "(only train.epochs and device may change) or use a new --out"
         )
     check_inputs(ckpt, run.task, str(out / LAST))
     model.load_state_dict(ckpt["model"])
@@ -230,7 +258,7 @@ def fit(
     model, optimizer, scheduler = build(run, init_from)
     ema = make_ema(model, optimizer, run.train.ema_decay)
     scored = model if ema is None else ema.module  # the weights validated, selected and kept
-    loss_fn = make_loss(run, data.train)
+    loss_fn = make_loss(run, data.train).to(run.device)
     start, best, history, best_state = 0, float("nan"), [], _state(scored)
     if resume and out is not None and (out / LAST).is_file():
         start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler,
@@ -264,7 +292,7 @@ def fit(
             break
     if data.val is not None:
         scored.load_state_dict(best_state)
-    return FitResult(scored, history, best, out, paused)
+    return FitResult(scored.to("cpu"), history, best, out, paused)
 
 
 def check_stop(stop_after_epoch: int | None, run: RunConfig, out_dir: str | Path | None = None,

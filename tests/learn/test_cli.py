@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+import torch
 import typer
 from typer.testing import CliRunner
 
@@ -117,6 +118,12 @@ def test_canvas_option_reaches_the_checkpoint(app, tiny_dataset, small_config, t
         (["train", "{data}", "--out", "{out}", "--canvas-mm", "0,383"], "both > 0"),
         (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--canvas-mm", "229,383"],
          "--canvas-mm does not apply"),
+        (["train", "{data}", "--out", "{out}", "--device", "gpu"], "is not a training device"),
+        pytest.param(["train", "{data}", "--out", "{out}", "--device", "cuda"],
+                     "sees no CUDA GPU", marks=pytest.mark.skipif(
+                         torch.cuda.is_available(), reason="this machine has a CUDA GPU")),
+        (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--device", "cuda"],
+         "--device does not apply"),
     ],
 )
 def test_errors_before_work(app, tiny_dataset, tmp_path, args, message):
