@@ -10,7 +10,6 @@ writes it beside the paper's Tables 3 and 8).
 from __future__ import annotations
 
 import copy
-import itertools
 import math
 import platform
 from dataclasses import dataclass
@@ -22,6 +21,7 @@ from matplotlib.figure import Figure
 from torch import nn
 
 from learn import metrics as M
+from learn.device import device_of
 from learn.experiments import paper
 from learn.inputs import unpressed_as_background
 from learn.models import prepare_for_inference
@@ -47,12 +47,6 @@ class EvalResult:
     def percent(self) -> torch.Tensor:
         """(C, C) float64: rows as percentages of the true class (the paper's tables)."""
         return M.percent_by_true_class(self.cm)
-
-
-def device_of(module: nn.Module) -> torch.device:
-    """The device of ``module``'s first parameter or buffer (the CPU when it has none)."""
-    first = next(itertools.chain(module.parameters(), module.buffers()), None)
-    return torch.device("cpu") if first is None else first.device
 
 
 def logits_of(model: nn.Module, x: torch.Tensor, batch_size: int = 64) -> torch.Tensor:

@@ -35,6 +35,7 @@ from learn.checkpoint import (
     make_checkpoint,
     save_checkpoint,
 )
+from learn.device import check_device
 from learn.evaluate import bf16_supported, evaluate_tensors, plot_history
 from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
@@ -141,22 +142,6 @@ def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task
     loss.backward()
     optimizer.step()
     return loss.item()
-
-
-def check_device(run: RunConfig) -> None:
-    """Raise ConfigError when ``run.device`` names a GPU this torch cannot reach."""
-    if run.device == "cpu":
-        return
-    if not torch.cuda.is_available():
-        raise ConfigError(
-            f"device {run.device!r}: this torch ({torch.__version__}) sees no CUDA GPU. Fix: "
-            "--device cpu, or install a CUDA build of torch on a machine with an NVIDIA GPU"
-        )
-    index = torch.device(run.device).index or 0
-    if index >= torch.cuda.device_count():
-        n = torch.cuda.device_count()
-        raise ConfigError(f"device {run.device!r}: this machine has {n} GPU(s). Fix: give cuda:0 "
-                          f"to cuda:{n - 1}")  # fmt: skip
 
 
 def check_precision(run: RunConfig) -> None:

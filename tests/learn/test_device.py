@@ -11,8 +11,8 @@ import torch
 
 import learn.train as T
 from learn.checkpoint import load_checkpoint, save_checkpoint
-from learn.evaluate import device_of
-from learn.train import RunConfig, check_device, fit, load_data
+from learn.device import check_device, device_of
+from learn.train import RunConfig, fit, load_data
 from tactile.errors import ConfigError
 
 
