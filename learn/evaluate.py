@@ -76,6 +76,7 @@ def evaluate_tensors(
     batches (NaN without a loss function); ``keep_predictions`` also returns the predictions.
     """
     cms, losses, preds, conf = [], [], [], []
+    loss_dev = None if loss_fn is None else device_of(loss_fn)  # where its class weights live
     for i in range(0, len(data.y), batch_size):
         x, y = data.x[i : i + batch_size], data.y[i : i + batch_size]
         out = logits_of(model, x, batch_size)
@@ -85,9 +86,8 @@ def evaluate_tensors(
             preds.append(pred)
             conf += [out.softmax(1).amax(1)] if y.ndim == 1 else []
         if loss_fn is not None:
-            dev = device_of(loss_fn)  # where its class weights live
             with torch.no_grad():
-                losses.append(float(loss_fn(out.to(dev), y.to(dev))) * len(y))
+                losses.append(float(loss_fn(out.to(loss_dev), y.to(loss_dev))) * len(y))
     cm = torch.stack(cms).sum(0)
     loss = sum(losses) / len(data.y) if losses else float("nan")
     return EvalResult(cm, scores(cm), loss, torch.cat(preds) if preds else None,

@@ -132,3 +132,19 @@ def checkpoints(tiny_dataset, tmp_path_factory):
         fit(run, load_data(tiny_dataset, run), folder, progress=False)
         out[arch] = folder / "best.pt"
     return out
+
+
+def resume_after_edit(run, data, folder, edit):
+    """(uninterrupted run, run resumed) of ``run``: trained whole in ``folder/full``, and in
+    ``folder/cut`` stopped after epoch 1, its last.pt's config edited in place by
+    ``edit(config)``, then resumed with ``run``."""
+    from learn.checkpoint import load_checkpoint, save_checkpoint
+
+    full = fit(run, data, folder / "full", progress=False)
+    fit(run, data, folder / "cut", progress=False, stop_after_epoch=1)
+    last = folder / "cut" / "last.pt"
+    ckpt = load_checkpoint(last)
+    edit(ckpt["config"])
+    save_checkpoint(ckpt, last)
+    return full, fit(run, data, folder / "cut", resume=True, progress=False)
+

@@ -10,10 +10,11 @@ import pytest
 import torch
 
 import learn.train as T
-from learn.checkpoint import load_checkpoint, save_checkpoint
 from learn.device import check_device, device_of
 from learn.train import RunConfig, fit, load_data
 from tactile.errors import ConfigError
+
+from .conftest import resume_after_edit
 
 
 @pytest.mark.parametrize("device", ["cpu", "cuda", "cuda:0", "cuda:12"])
@@ -49,13 +50,7 @@ def test_run_resumes_on_another_device(tiny_dataset, tiny_run, tmp_path):
     losses; any other change of configuration is still refused."""
     run = tiny_run("handsnet", epochs=2)
     data = load_data(tiny_dataset, run)
-    full = fit(run, data, tmp_path / "full", progress=False)
-    fit(run, data, tmp_path / "cut", progress=False, stop_after_epoch=1)
-    last = tmp_path / "cut" / "last.pt"
-    ckpt = load_checkpoint(last)
-    ckpt["config"]["device"] = "cuda:0"
-    save_checkpoint(ckpt, last)
-    resumed = fit(run, data, tmp_path / "cut", resume=True, progress=False)
+    full, resumed = resume_after_edit(run, data, tmp_path, lambda c: c.update(device="cuda:0"))
     assert [h["train_loss"] for h in resumed.history] == [h["train_loss"] for h in full.history]
     assert device_of(resumed.model) == torch.device("cpu")
     with pytest.raises(ConfigError, match=r"only train\.epochs and device may change"):

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from learn.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
+from learn.checkpoint import load_checkpoint, model_from_checkpoint
 from learn.config import FINETUNE_TEST_C
 from learn.crossval import cross_validate, folds, parse_grid
 from learn.data import TorchTactileDataset
@@ -27,7 +27,7 @@ from tactile.config import to_dict
 from tactile.dataset import open_dataset
 from tactile.errors import ConfigError
 
-from .conftest import N_HAND, N_OTHER
+from .conftest import N_HAND, N_OTHER, resume_after_edit
 
 
 @pytest.fixture(autouse=True)
@@ -109,13 +109,7 @@ def test_resume_a_checkpoint_older_than_a_config_key(tiny_dataset, tiny_run, tmp
     key takes its default, the old behaviour. Any other difference is still refused."""
     run = tiny_run("handsnet", epochs=2)
     data = load_data(tiny_dataset, run)
-    full = fit(run, data, tmp_path / "full", progress=False)
-    fit(run, data, tmp_path / "cut", progress=False, stop_after_epoch=1)
-    last = tmp_path / "cut" / "last.pt"
-    ckpt = load_checkpoint(last)
-    del ckpt["config"]["rot180"]
-    save_checkpoint(ckpt, last)
-    resumed = fit(run, data, tmp_path / "cut", resume=True, progress=False)
+    full, resumed = resume_after_edit(run, data, tmp_path, lambda c: c.pop("rot180"))
     assert [h["train_loss"] for h in resumed.history] == [h["train_loss"] for h in full.history]
     with pytest.raises(ConfigError, match="another configuration"):
         fit(replace_train(run, lr=0.5), data, tmp_path / "cut", resume=True, progress=False)
