@@ -23,8 +23,8 @@ import time
 
 import torch
 
-from learn.evaluate import bf16_supported
 from learn.experiments.models import preset_run
+from learn.fastpath import bf16_supported
 from learn.folder import TensorData
 from learn.train import PRECISIONS, build, make_loss, train_epoch, views_of
 

@@ -1,17 +1,14 @@
-"""Evaluation: metrics and confusion matrices of a model on tensors, the fast CPU inference
-path, time per image, loss curves, and a checkpoint's row of the report (``learn.eval_report``
-writes it beside the paper's Tables 3 and 8).
+"""Evaluation: metrics and confusion matrices of a model on tensors, loss curves, and a
+checkpoint's row of the report (``learn.eval_report`` writes it beside the paper's Tables 3 and
+8); the fast inference path and the timing are ``learn.fastpath``.
 
     res = evaluate_tensors(model, data.test, num_classes=2)   # res.metrics, res.cm, res.percent
-    fast = fast_inference(model)           # BN folded, channels-last, bf16 where it is safe
     row = evaluate_checkpoint("runs/handsnet/best.pt", "out/forearm")
 """
 
 from __future__ import annotations
 
-import copy
 import math
-import platform
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,12 +20,11 @@ from torch import nn
 from learn import metrics as M
 from learn.device import device_of
 from learn.experiments import paper
+from learn.fastpath import cpu_ms_per_image, fast_inference, gpu_ms_per_image
 from learn.inputs import unpressed_as_background
 from learn.models import prepare_for_inference
 from learn.tta import FlipTTA
 from tactile.errors import ConfigError
-
-CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
 
 
 @dataclass
@@ -92,87 +88,6 @@ def evaluate_tensors(
     loss = sum(losses) / len(data.y) if losses else float("nan")
     return EvalResult(cm, scores(cm), loss, torch.cat(preds) if preds else None,
                       torch.cat(conf) if conf else None)  # fmt: skip
-
-
-class FastInference(nn.Module):
-    """A prepared model (BN folded, channels-last weights) fed channels-last input, optionally
-    with its weights stored in bfloat16 (cast once, not per call as autocast would); returns
-    float32 logits. Keeps the wrapped model's attributes."""
-
-    def __init__(self, prepared: nn.Module, bf16: bool) -> None:
-        super().__init__()
-        self.net = copy.deepcopy(prepared).to(torch.bfloat16) if bf16 else prepared
-        self.bf16 = bf16
-        for name in ("num_classes", "in_channels", "task", "input_size"):
-            if hasattr(prepared, name):
-                setattr(self, name, getattr(prepared, name))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """``(B, C, H, W)`` → logits of the wrapped model, float32."""
-        dtype = torch.bfloat16 if self.bf16 else torch.float32
-        return self.net(x.to(dtype).contiguous(memory_format=torch.channels_last)).float()
-
-
-_X86 = ("x86_64", "amd64", "i386", "i686")
-
-
-def bf16_supported() -> bool:
-    """True when this CPU has native bfloat16 for oneDNN: on x86, AVX512-BF16 or AMX (with AVX-512
-    alone oneDNN emulates it, 3x slower than fp32 for HandsNet); elsewhere, as oneDNN says."""
-    try:
-        if not torch.ops.mkldnn._is_mkldnn_bf16_supported():
-            return False
-        if platform.machine().lower() in _X86:
-            return bool(torch.cpu._is_avx512_bf16_supported() or torch.cpu._is_amx_tile_supported())
-        return True
-    except (AttributeError, RuntimeError):
-        return False
-
-
-def agreement(a: nn.Module, b: nn.Module, x: torch.Tensor) -> float:
-    """Fraction of argmax predictions (images or pixels) on which two models agree."""
-    with torch.inference_mode():
-        return float((a(x).argmax(1) == b(x).argmax(1)).double().mean())
-
-
-def fast_inference(model: nn.Module, *, bf16: bool | None = None, check: torch.Tensor | None = None,
-                   min_agreement: float = 1.0) -> nn.Module:  # fmt: skip
-    """The default CPU inference path: ``prepare_for_inference`` + channels-last input + bf16.
-
-    bf16 (default: classifiers on CPUs with native bf16) is kept only if the argmax agrees with
-    the float model on ``check`` images (default: 32 seeded uniform random images) at least
-    ``min_agreement`` of the time; otherwise the float path is returned.
-    """
-    prepared = prepare_for_inference(model)
-    if bf16 is None:
-        bf16 = getattr(model, "task", "") == "classification" and bf16_supported()
-    float_path = FastInference(prepared, False).eval()
-    if not bf16:
-        return float_path
-    if check is None:
-        size = getattr(model, "input_size", (68, 100))
-        gen = torch.Generator().manual_seed(CHECK_SEED)
-        check = torch.rand(32, getattr(model, "in_channels", 1), *size, generator=gen)
-    fast = FastInference(prepared, True).eval()
-    return fast if agreement(fast, float_path, check) >= min_agreement else float_path
-
-
-def cpu_ms_per_image(model: nn.Module, input_size: tuple[int, int], threads: int = 1,
-                     n_runs: int = 100) -> float:  # fmt: skip
-    """Median CPU ms per image at batch 1 after warm-up, with ``threads`` torch threads."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(threads)
-    try:
-        return 1e3 * M.time_per_image(model, input_size, "cpu", n_warmup=20, n_runs=n_runs)
-    finally:
-        torch.set_num_threads(before)
-
-
-def gpu_ms_per_image(model: nn.Module, input_size: tuple[int, int]) -> float | None:
-    """Median GPU ms per image at batch 1 after warm-up, or None without CUDA."""
-    if not torch.cuda.is_available():
-        return None
-    return 1e3 * M.time_per_image(copy.deepcopy(model), input_size, "cuda")
 
 
 def plot_history(history: list[dict], path: str | Path, title: str = "",

@@ -25,7 +25,8 @@ import torch
 from matplotlib.figure import Figure
 
 from learn.checkpoint import load_checkpoint
-from learn.evaluate import fast_inference, tta_views
+from learn.evaluate import tta_views
+from learn.fastpath import fast_inference
 from learn.folder import is_dataset, read_grey
 from learn.inputs import input_canvas, labels_on_map, net_input
 from learn.int8_file import is_int8

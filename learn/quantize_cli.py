@@ -37,7 +37,7 @@ def quantize_command(
     import torch
 
     from learn.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
-    from learn.evaluate import cpu_ms_per_image, prepare_for_inference
+    from learn.fastpath import cpu_ms_per_image, prepare_for_inference
     from learn.int8_file import int8_checkpoint, is_int8
     from learn.quantize import (
         MIN_CALIBRATION,

@@ -36,7 +36,8 @@ from learn.checkpoint import (
     save_checkpoint,
 )
 from learn.device import check_device
-from learn.evaluate import bf16_supported, evaluate_tensors, plot_history
+from learn.evaluate import evaluate_tensors, plot_history
+from learn.fastpath import bf16_supported
 from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
 from learn.losses import SegmentationLoss

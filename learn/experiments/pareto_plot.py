@@ -142,7 +142,7 @@ def setup_text(rows: Sequence[dict], data: str, config: dict) -> str:
             " **At this budget networks trained here barely leave chance level**: give the main "
             "models (--classifier, --segmenter) or use the full setting for meaningful scores."
             if config["budget_min"] < 1 else "") + "\n\n"
-        "CPU time: `learn.evaluate.cpu_ms_per_image` — median over the timed runs after 20 "
+        "CPU time: `learn.fastpath.cpu_ms_per_image` — median over the timed runs after 20 "
         "warm-up runs, batch 1, 1 thread, network forward only on a random input, for the model "
         "in eval mode and for the fast path (`fast_inference`: batch norm folded, channels-last,"
         " bf16 weights where this CPU has bf16 kernels and the accuracy stays within 0.5 points"

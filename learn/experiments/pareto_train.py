@@ -4,7 +4,7 @@
     row, model = runner.row(variant)      # trained (or given / reused), scored, timed
     rows = classic_rows(runner, (68, 100), ("0.25", vgg_model))   # BoVW, VGG16 + SVM
 
-Times are CPU ms per image at batch 1 on 1 thread (``learn.evaluate.cpu_ms_per_image``: median
+Times are CPU ms per image at batch 1 on 1 thread (``learn.fastpath.cpu_ms_per_image``: median
 of the runs after 20 warm-up runs, network forward only, random input) for the model in eval
 mode and for the fast path (``fast_inference``: batch norm folded, channels-last, bf16 weights
 where the CPU has bf16 kernels and the predictions agree).
@@ -160,7 +160,8 @@ class Runner:
 def measure(model, test, task: str, size: tuple[int, int], runs: int) -> dict:
     """Test metrics of the fast CPU path (``fast_inference``; bf16 kept only if the accuracy
     stays within 0.5 points of eval mode) and CPU ms/image of eval mode and the fast path."""
-    from learn.evaluate import cpu_ms_per_image, evaluate_tensors, fast_inference
+    from learn.evaluate import evaluate_tensors
+    from learn.fastpath import cpu_ms_per_image, fast_inference
 
     n_cls = model.num_classes
     fast = fast_inference(model, check=test.x[:64])

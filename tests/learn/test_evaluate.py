@@ -24,10 +24,10 @@ from learn.eval_report import confusion_markdown, save_error_sheets, write_repor
 from learn.evaluate import (
     evaluate_checkpoint,
     evaluate_tensors,
-    fast_inference,
     plot_history,
 )
 from learn.experiments import paper
+from learn.fastpath import fast_inference
 from learn.folder import TensorData
 from learn.models import create_model
 from learn.train import fit, load_data

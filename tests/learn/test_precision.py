@@ -147,7 +147,7 @@ def test_bf16_support_means_native_bf16_on_x86():
     import platform
     from pathlib import Path
 
-    from learn.evaluate import bf16_supported
+    from learn.fastpath import bf16_supported
 
     cpuinfo = Path("/proc/cpuinfo")
     if platform.machine().lower() not in ("x86_64", "amd64") or not cpuinfo.exists():
