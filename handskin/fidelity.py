@@ -51,7 +51,7 @@ METRIC = {"handsnet": "accuracy", "segnet": "mean_iou"}
 @dataclasses.dataclass(frozen=True)
 class FidelityPlan:
     """Sizes of one run: samples per setting, probe epochs, network input (rows, columns) px,
-    generator processes, seed, and whether SegNet is trained too."""
+    generator processes, seed, whether SegNet is trained too, and where the probes train."""
 
     n: int
     epochs: int
@@ -59,6 +59,7 @@ class FidelityPlan:
     workers: int
     seed: int
     segnet: bool
+    device: str = "cpu"
 
     def __post_init__(self) -> None:
         for name, (lo, hi) in LIMITS.items():
@@ -70,6 +71,10 @@ class FidelityPlan:
                               "(HandsNet's four pooling blocks need >= 24)")  # fmt: skip
         if not 0 <= self.seed < 2**63:
             raise ConfigError(f"seed = {self.seed} is out of range; allowed [0, 2**63 - 1]")
+        if self.device != "cpu":
+            from learn.device import check_device  # imports torch
+
+            check_device(self.device)
 
 
 def parse_image_px(text: str) -> tuple[int, int]:
@@ -87,7 +92,8 @@ def probe_run(arch: str, plan: FidelityPlan) -> RunConfig:
     from learn.experiments.models import preset_run
 
     drop = max(1, round(0.75 * plan.epochs))
-    run = preset_run(arch, epochs=plan.epochs, seed=plan.seed, lr_drop_period_epochs=drop)
+    run = preset_run(arch, epochs=plan.epochs, seed=plan.seed, lr_drop_period_epochs=drop,
+                     device=plan.device)  # fmt: skip
     model = dataclasses.replace(run.model, input_size=tuple(plan.image_px))
     return dataclasses.replace(run, model=model, val_fraction=0.0, flips=False)
 
@@ -156,12 +162,13 @@ def run_fidelity(out: str | Path, *, data_dir: str | Path | None = None,
                  n: int | None = None, epochs: int | None = None,
                  image_px: tuple[int, int] | None = None, workers: int | None = None,
                  part: str = "forearm", segnet: bool = False,
-                 base: GenerateConfig | None = None,
+                 base: GenerateConfig | None = None, device: str = "cpu",
                  progress: bool = True) -> dict:  # fmt: skip
     """Run the experiment into ``out`` (report.md, results.json, PNG charts); returns results.
 
     n : samples generated per setting (None: `QUICK` or `FULL`). base : the GenerateConfig the
-    settings change (default: defaults on ``part``). Every input is checked before any work.
+    settings change (default: defaults on ``part``). device : where the probes train ("cpu",
+    "cuda", "cuda:N"). Every input is checked before any work.
     """
     from sim.gen_config import GenerateConfig
     from sim.generate import default_workers
@@ -171,7 +178,7 @@ def run_fidelity(out: str | Path, *, data_dir: str | Path | None = None,
                         sizes["epochs"] if epochs is None else epochs,
                         tuple(IMAGE_PX if image_px is None else image_px),
                         default_workers() if workers is None else workers, seed,
-                        segnet)  # fmt: skip
+                        segnet, device)  # fmt: skip
     chosen = FS.resolve_settings(settings, quick)
     base = base if base is not None else GenerateConfig(part=part)
     configs = {s.name: FS.setting_config(s, base, n=plan.n, seed=seed)

@@ -11,6 +11,7 @@ from typing import Annotated
 import typer
 
 from handskin import fidelity_settings as FS
+from learn.experiments.models import DEVICE_HELP
 from tactile.errors import HandskinError
 
 _SETTINGS_HELP = (
@@ -43,6 +44,7 @@ def fidelity_command(
                     "metres).")] = "forearm",
     segnet: Annotated[bool, typer.Option("--segnet", help="Also train SegNet on each setting "
                       "and report its mean IoU (%) (slow: hours at full size).")] = False,
+    device: Annotated[str, typer.Option("--device", help=DEVICE_HELP)] = "cpu",
     progress: Annotated[bool, typer.Option("--progress/--no-progress",
                         help="Progress bars (on/off).")] = True,
 ) -> None:
@@ -57,7 +59,8 @@ def fidelity_command(
         px = parse_image_px(image_px) if image_px is not None else None
         run_fidelity(out, data_dir=data, settings=settings, quick=quick, seed=seed,
                      n=n, epochs=epochs, image_px=px,
-                     workers=workers, part=part, segnet=segnet, progress=progress)  # fmt: skip
+                     workers=workers, part=part, segnet=segnet, device=device,
+                     progress=progress)  # fmt: skip
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     typer.echo(f"wrote {Path(out) / 'report.md'}")

@@ -22,6 +22,7 @@ from typing import Annotated
 import numpy as np
 import typer
 
+from learn.experiments.models import DEVICE_HELP
 from learn.experiments.transfer_lib import TransferSettings
 from tactile.errors import ConfigError, HandskinError
 
@@ -182,6 +183,8 @@ def transfer_command(
                      "image centred on a canvas of the forearm map's size (mm) instead of "
                      "stretched to the network input, so a millimetre is as many input pixels "
                      "as on the forearm; adds 'forearm at scale' rows.") = False,
+    device: _opt(str, DEVICE_HELP + " A fine-tuning result is reused only for the same device."
+                 ) = "cpu",
     models: _opt(Path | None, "Folder (path) of the models trained here and of every "
                  "fine-tuning result (finetune/*.json); default OUT/models; a rerun reuses them, "
                  "so a stopped run resumes.") = None,
@@ -200,7 +203,7 @@ def transfer_command(
                               "Fix: drop one of them")  # fmt: skip
         s = dataclasses.replace(base, seed=seed, segmentation=segmentation or segmenter is not None,
                                 classification=classification, precision=precision,
-                                keep_scale=keep_scale,
+                                keep_scale=keep_scale, device=device,
                                 **{k: v for k, v in changes.items() if v is not None})
         counts = {"n_target": n_target, "n_pretrain": n_pretrain, "n_source": n_source}
         plan = dataclasses.replace(QUICK_DATA if quick else DataPlan(), workers=workers,

@@ -20,6 +20,7 @@ from tactile.config import from_dict, read_toml, to_dict
 from tactile.errors import ConfigError
 
 PRECISIONS = ("fp32", "bf16")  # RunConfig.precision: the training forward pass's number format
+DEVICE_PATTERN = r"cpu|cuda(:\d+)?"  # RunConfig.device: the CPU, or a CUDA GPU (by index)
 TASK_OF_ARCH = {"handsnet": "classify", "vgg16": "classify", "segnet": "segment",
                 "fcn16s": "segment"}  # fmt: skip
 
@@ -71,7 +72,7 @@ class RunConfig:
             )
         if self.patience_epochs < 0 or self.threads < 1 or self.eval_batch_size < 1:
             raise ConfigError("RunConfig: patience_epochs >= 0, threads >= 1, eval_batch_size >= 1")
-        if not re.fullmatch(r"cpu|cuda(:\d+)?", self.device):
+        if not re.fullmatch(DEVICE_PATTERN, self.device):
             raise ConfigError(
                 f"RunConfig.device {self.device!r} is not a training device. Fix: device = "
                 '"cpu" (the default), "cuda" or "cuda:N" (a GPU; --device)'

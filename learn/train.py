@@ -150,7 +150,7 @@ def check_precision(run: RunConfig) -> None:
     (:func:`check_device`), or ``run.precision`` is "bf16" on a CPU without native bfloat16
     kernels (autocast would emulate them and train slower than float32) or on a GPU without
     bfloat16."""
-    check_device(run)
+    check_device(run.device)
     if run.precision == "bf16" and run.device != "cpu":
         if not torch.cuda.is_bf16_supported():
             raise ConfigError(f"precision \"bf16\": GPU {run.device!r} has no bfloat16. "

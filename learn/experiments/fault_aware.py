@@ -21,6 +21,7 @@ from typing import Annotated
 
 import typer
 
+from learn.experiments.models import DEVICE_HELP
 from learn.experiments.robustness_faults import FaultMix
 from learn.experiments.robustness_models import QUICK_PLAN
 from learn.experiments.robustness_setup import Scale
@@ -76,7 +77,7 @@ def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int
         (out / RECIPE).write_text(json.dumps(recipe, indent=1))
     run = run_from_dict(load_checkpoint(plain)["config"])
     run = replace_train(run, epochs=epochs, lr=run.train.lr * scale.lr_factor, seed=seed)
-    run = dataclasses.replace(run, flips=False)
+    run = dataclasses.replace(run, flips=False, device=scale.eval.plan.device)
     made: list = []  # the augmented data, when this call trains
 
     def make_data():
@@ -115,7 +116,7 @@ def run_fault_aware(data, out, *, scale: FaultAwareScale = FULL_FA, seed: int = 
     from learn.experiments.robustness_fa_report import write_report
     from learn.experiments.robustness_setup import check_inputs, config_of, prepare
 
-    check_inputs(data, classifier, segmenter, threads)
+    check_inputs(data, classifier, segmenter, threads, scale.eval.plan.device)
     rep = Report("fault-aware", out, seed=seed, config={
         **config_of(data, scale.eval, classifier, segmenter, threads),
         "fault_aware": dataclasses.asdict(scale)})  # fmt: skip
@@ -166,6 +167,7 @@ PatternsOpt = _opt(int | None, "Random patterns per condition (count; default 5,
 LrOpt = _opt(float | None, "Fine-tuning learning rate / the plain run's (ratio; default 0.1).")
 ModelsOpt = _opt(Path | None, "Folder of networks trained here and reused (default OUT/models).")
 ThreadsOpt = _opt(int, "CPU threads used by torch (count).")
+DeviceOpt = _opt(str, DEVICE_HELP)
 ProgressOpt = _opt(bool, "Show progress bars.")
 
 
@@ -173,7 +175,8 @@ def fault_aware_command(
     out: OutOpt, data: DataOpt, quick: QuickOpt = False, seed: SeedOpt = 0,
     classifier: ClfOpt = None, segmenter: SegOpt = None, epochs: EpochsOpt = None,
     copies: CopiesOpt = None, patterns: PatternsOpt = None, lr_factor: LrOpt = None,
-    models: ModelsOpt = None, threads: ThreadsOpt = 2, progress: ProgressOpt = True,
+    models: ModelsOpt = None, threads: ThreadsOpt = 2, device: DeviceOpt = "cpu",
+    progress: ProgressOpt = True,
 ) -> None:  # fmt: skip
     """Fault-aware training (see ``FA_HELP``)."""
     from learn.cli import _fail
@@ -183,7 +186,7 @@ def fault_aware_command(
         changes = {"epochs": None if epochs is None else (epochs, epochs), "copies": copies,
                    "lr_factor": lr_factor}  # fmt: skip
         scale = dataclasses.replace(scale, **{k: v for k, v in changes.items() if v is not None})
-        scale = dataclasses.replace(scale, eval=scale.eval.changed(patterns, None, None))
+        scale = dataclasses.replace(scale, eval=scale.eval.changed(patterns, None, None, device))
         path = run_fault_aware(data, out, scale=scale, seed=seed, classifier=classifier,
                                segmenter=segmenter, models_dir=models, threads=threads,
                                progress=progress)  # fmt: skip

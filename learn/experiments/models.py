@@ -15,9 +15,16 @@ from pathlib import Path
 
 from tactile.errors import ConfigError, DataError
 
+#: ``--device`` of the experiments that train networks.
+DEVICE_HELP = ("Where the networks trained here train: cpu (the default) or cuda / cuda:N (a GPU, "
+               "with a CUDA build of torch). Networks already in the models folder are reused "
+               "wherever they trained; times per image are measured on the CPU either way; "
+               "no unit.")
 
-def preset_run(arch: str, **train_changes: object):
-    """The ``learn.config`` preset of ``arch`` as a RunConfig, with TrainConfig fields changed."""
+
+def preset_run(arch: str, *, device: str = "cpu", **train_changes: object):
+    """The ``learn.config`` preset of ``arch`` as a RunConfig training on ``device`` ("cpu",
+    "cuda", "cuda:N"), with TrainConfig fields changed."""
     from learn import config as C
     from learn.train import RunConfig, replace_train
 
@@ -25,7 +32,7 @@ def preset_run(arch: str, **train_changes: object):
                "fcn16s": C.FCN16S}  # fmt: skip
     if arch not in presets:
         raise ConfigError(f"unknown arch {arch!r}; choose one of: {', '.join(presets)}")
-    run = RunConfig(model=presets[arch].model, train=presets[arch].train)
+    run = RunConfig(model=presets[arch].model, train=presets[arch].train, device=device)
     changes = {k: v for k, v in train_changes.items() if v is not None}
     return replace_train(run, **changes) if changes else run
 
@@ -41,13 +48,15 @@ def ensure_model(
     seed: int = 0,
     progress: bool = True,
     name: str | None = None,
+    device: str = "cpu",
 ) -> Path:
     """Path of a trained checkpoint of ``arch`` for dataset ``data``.
 
     checkpoint : use this .pt file as is (checked to exist).
-    run : a ``learn.train.RunConfig`` to train with (default: the arch's preset, with ``epochs``
-    and ``seed`` changed when given). The model is trained into ``models_dir/<name or arch>`` and
-    reused when ``best.pt`` is already there.
+    run : a ``learn.train.RunConfig`` to train with (default: the arch's preset on ``device``,
+    with ``epochs`` and ``seed`` changed when given). The model is trained into
+    ``models_dir/<name or arch>`` and reused when ``best.pt`` is already there, wherever it
+    trained.
     """
     from learn.train import load_data
 
@@ -57,7 +66,7 @@ def ensure_model(
             raise DataError(f"no checkpoint at {checkpoint}. Fix: a .pt file from handskin train")
         return checkpoint
     out = Path(models_dir) / (name or arch)
-    run = run if run is not None else preset_run(arch, epochs=epochs, seed=seed)
+    run = run if run is not None else preset_run(arch, epochs=epochs, seed=seed, device=device)
     if run.model.arch != arch:
         run = dataclasses.replace(run, model=dataclasses.replace(run.model, arch=arch))
     return train_once(out, run, lambda: load_data(data, run, progress=progress),
@@ -108,7 +117,7 @@ def train_once(
 
 def check_reusable(path: Path, run) -> None:
     """ConfigError unless the checkpoint at ``path`` (when there is one) was trained with
-    ``run``'s configuration."""
+    ``run``'s configuration; where it trained (``device``) does not count."""
     from learn.checkpoint import check_inputs, load_checkpoint
     from learn.train import run_from_dict
 
@@ -117,7 +126,7 @@ def check_reusable(path: Path, run) -> None:
     ckpt = load_checkpoint(path)
     stored = run_from_dict(ckpt["config"])
     check_inputs(ckpt, stored.task, str(path))
-    if stored != run:
+    if dataclasses.replace(stored, device=run.device) != run:
         raise ConfigError(
             f"{path} was trained with another configuration than this experiment asks for "
             f"(stored {stored.model.arch} {stored.train}, asked {run.model.arch} {run.train}). "

@@ -287,8 +287,8 @@ def pareto_command(
                      "multipliers. Default 0.25,0.5.") = None,
     seg_sizes: _opt(str | None, "Main segmenter's input sizes: <h>x<w> pixels or 'full'. "
                     "Default 34x50,68x100,136x200.") = None,
-    budget_min: _opt(float | None, "Training wall-clock budget per trained variant, minutes "
-                     "(default 2.0; quick 0.4).") = None,
+    budget_min: _opt(float | None, "Training budget per trained variant, wall-clock minutes "
+                     "on the CPU (default 2.0; quick 0.4).") = None,
     max_steps: _opt(int | None, "Cap on SGD steps per trained variant (count).") = None,
     max_train: _opt(int | None, "Train samples used (count, seeded subset; 0 = all).") = None,
     max_test: _opt(int | None, "Test samples scored per variant (count, seeded subset; "

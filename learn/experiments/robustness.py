@@ -17,6 +17,7 @@ from typing import Annotated
 
 import typer
 
+from learn.experiments.models import DEVICE_HELP
 from learn.experiments.robustness_setup import (
     FULL,
     QUICK,
@@ -38,7 +39,7 @@ def run_robustness_a(data, out, *, scale: Scale = FULL, seed: int = 0, classifie
     from learn.experiments.report import Report
     from learn.experiments.robustness_eval import blind_spot_study
 
-    check_inputs(data, classifier, segmenter, threads)
+    check_inputs(data, classifier, segmenter, threads, scale.plan.device)
     rep = Report("robustness-a", out, seed=seed,
                  config=config_of(data, scale, classifier, segmenter, threads))  # fmt: skip
     prep = prepare(data, out, scale, seed, classifier, segmenter, models_dir, threads, progress)
@@ -84,7 +85,7 @@ def run_robustness_b(data, out, *, scale: Scale = FULL, seed: int = 0, classifie
     from learn.experiments.report import Report
     from learn.experiments.robustness_eval import removal_study
 
-    check_inputs(data, classifier, segmenter, threads)
+    check_inputs(data, classifier, segmenter, threads, scale.plan.device)
     rep = Report("robustness-b", out, seed=seed,
                  config=config_of(data, scale, classifier, segmenter, threads))  # fmt: skip
     prep = prepare(data, out, scale, seed, classifier, segmenter, models_dir, threads, progress)
@@ -163,6 +164,7 @@ SegNOpt = _opt(int | None, "Test hand samples segmented, a fixed-seed subset (co
 ModelsOpt = _opt(Path | None, "Folder of networks trained here, reused when present (default: "
                  "OUT/models; share it between experiments).")
 ThreadsOpt = _opt(int, "CPU threads used by torch (count).")
+DeviceOpt = _opt(str, DEVICE_HELP)
 ProgressOpt = _opt(bool, "Show progress bars.")
 
 
@@ -173,11 +175,11 @@ def _command(run, name: str):
                 classifier: ClfOpt = None, segmenter: SegOpt = None,
                 patterns: PatternsOpt = None, test_samples: TestOpt = None,
                 seg_samples: SegNOpt = None, models: ModelsOpt = None, threads: ThreadsOpt = 2,
-                progress: ProgressOpt = True) -> None:  # fmt: skip
+                device: DeviceOpt = "cpu", progress: ProgressOpt = True) -> None:  # fmt: skip
         from learn.cli import _fail
 
         try:
-            scale = (QUICK if quick else FULL).changed(patterns, test_samples, seg_samples)
+            scale = (QUICK if quick else FULL).changed(patterns, test_samples, seg_samples, device)
             path = run(data, out, scale=scale, seed=seed, classifier=classifier,
                        segmenter=segmenter, models_dir=models, threads=threads,
                        progress=progress)  # fmt: skip

@@ -11,12 +11,14 @@ With the full plan a missing network is trained by ``learn.experiments.models.en
 from __future__ import annotations
 
 import dataclasses
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from learn.experiments.robustness_data import KEY_SUBSET, stream
+from learn.run_config import DEVICE_PATTERN
 from tactile.errors import ConfigError
 
 SEG_ARCHS = ("segnet", "fcn16s")
@@ -30,7 +32,9 @@ class TrainPlan:
     classifier, a seeded subset (None: all); seg_n_train : the same for the segmenter (None:
     all). flips : the paper's threefold flip augmentation. seg_width : channel multiplier
     of the segmenter (None: the preset's). input_size : (h, w) px (None: preset). suffix :
-    appended to the model folder name, so plans never reuse each other's networks.
+    appended to the model folder name, so plans never reuse each other's networks. device :
+    where they train ("cpu", "cuda", "cuda:N"); a network already trained is reused wherever
+    it trained.
     """
 
     epochs: int | None = None
@@ -40,6 +44,7 @@ class TrainPlan:
     seg_width: float | None = None
     input_size: tuple[int, int] | None = None
     suffix: str = ""
+    device: str = "cpu"
 
     def __post_init__(self) -> None:
         if self.epochs is not None and self.epochs < 1:
@@ -47,6 +52,9 @@ class TrainPlan:
         if min(n for n in (self.n_train, self.seg_n_train, 2) if n is not None) < 2:
             raise ConfigError(f"training samples must be >= 2, got {self.n_train}, "
                               f"{self.seg_n_train}")  # fmt: skip
+        if not re.fullmatch(DEVICE_PATTERN, self.device):
+            raise ConfigError(f"device {self.device!r} is not a training device. Fix: --device "
+                              "cpu, cuda or cuda:N")  # fmt: skip
 
     def samples(self, arch: str) -> int | None:
         """Train samples used for ``arch`` (None: all)."""
@@ -64,7 +72,7 @@ def plan_run(arch: str, plan: TrainPlan, seed: int):
     """The arch's preset RunConfig changed as ``plan`` says."""
     from learn.experiments.models import preset_run
 
-    run = preset_run(arch, epochs=plan.epochs, seed=seed)
+    run = preset_run(arch, epochs=plan.epochs, seed=seed, device=plan.device)
     model = run.model
     if plan.seg_width is not None and arch in SEG_ARCHS:
         model = dataclasses.replace(model, width=plan.seg_width)
@@ -115,9 +123,9 @@ def resolve_model(
     """Path of a checkpoint of ``arch``: the given one, or one trained as ``plan`` says."""
     from learn.experiments.models import ensure_model, train_once
 
-    if checkpoint is not None or plan == FULL_PLAN:
+    if checkpoint is not None or dataclasses.replace(plan, device=FULL_PLAN.device) == FULL_PLAN:
         return ensure_model(arch, data, models_dir, checkpoint=checkpoint, seed=seed,
-                            progress=progress)  # fmt: skip
+                            progress=progress, device=plan.device)  # fmt: skip
     out, run = Path(models_dir) / f"{arch}{plan.suffix}", plan_run(arch, plan, seed)
     return train_once(out, run, lambda: split_data(data, run, plan.samples(arch), seed,
                                                    progress)[0], progress=progress)[0]  # fmt: skip

@@ -49,11 +49,13 @@ class Scale:
         if not all(0.0 <= f < 1.0 for f in self.fractions):
             raise ConfigError(f"removed shares must lie in [0, 1), got {self.fractions}")
 
-    def changed(self, patterns: int | None, test_samples: int | None,
-                seg_samples: int | None) -> Scale:  # fmt: skip
-        """A copy with the command line's counts (None keeps a field)."""
+    def changed(self, patterns: int | None, test_samples: int | None, seg_samples: int | None,
+                device: str | None = None) -> Scale:  # fmt: skip
+        """A copy with the command line's counts and training device (None keeps a field)."""
         new = {"n_patterns": patterns, "n_classify": test_samples, "n_segment": seg_samples}
-        return dataclasses.replace(self, **{k: v for k, v in new.items() if v is not None})
+        plan = self.plan if device is None else dataclasses.replace(self.plan, device=device)
+        return dataclasses.replace(self, plan=plan,
+                                   **{k: v for k, v in new.items() if v is not None})
 
 
 FULL = Scale(n_patterns=10, n_classify=None, n_segment=200)
@@ -154,12 +156,15 @@ class Prepared:
     minutes: dict[str, float]
 
 
-def check_inputs(data, classifier, segmenter, threads: int) -> None:
-    """Fail before any work: the dataset's test split, the checkpoints' tasks, threads."""
+def check_inputs(data, classifier, segmenter, threads: int, device: str = "cpu") -> None:
+    """Fail before any work: the dataset's test split, the checkpoints' tasks, threads, the
+    training device."""
+    from learn.device import check_device
     from learn.experiments.robustness_data import load_frames
 
     if threads < 1:
         raise ConfigError(f"threads must be >= 1, got {threads}")
+    check_device(device)
     load_frames(data, "test", n_classify=1, n_segment=1)
     for path, task in ((classifier, "classify"), (segmenter, "segment")):
         if path is not None:

@@ -53,6 +53,7 @@ class TransferSettings:
     threads: int = 2  # torch CPU threads
     precision: str = "fp32"  # training forward pass of every run here ("bf16": RunConfig.precision)
     keep_scale: bool = False  # also the forearm model at its own mm per pixel (AT_SCALE rows)
+    device: str = "cpu"  # where every run here trains (RunConfig.device: "cpu", "cuda", "cuda:N")
 
     def __post_init__(self) -> None:
         if not self.curve_sizes or min(self.curve_sizes) < 1:
@@ -62,10 +63,10 @@ class TransferSettings:
         if not (self.classification or self.segmentation):
             raise ConfigError("neither classification nor segmentation is asked for. Fix: drop "
                               "--no-classification or add --segmentation")  # fmt: skip
-        if self.precision != "fp32":  # unknown, or bf16 on a CPU without it (imports torch)
+        if (self.precision, self.device) != ("fp32", "cpu"):  # unknown, or absent (imports torch)
             from learn.train import RunConfig, check_precision
 
-            check_precision(RunConfig(precision=self.precision))
+            check_precision(RunConfig(precision=self.precision, device=self.device))
 
 
 def nested_order(labels: np.ndarray, seed: int) -> np.ndarray:
@@ -133,7 +134,7 @@ def finetune_run(model, s: TransferSettings, scratch: bool):
         lr_factors={} if scratch else C.FINETUNE_TEST_C.lr_factors,
     )  # fmt: skip
     return RunConfig(model=model, train=train, val_fraction=0.0, threads=s.threads,
-                     precision=s.precision)  # fmt: skip
+                     precision=s.precision, device=s.device)  # fmt: skip
 
 
 def pretrain_run(model, s: TransferSettings):
@@ -142,7 +143,7 @@ def pretrain_run(model, s: TransferSettings):
 
     run = preset_run(model.arch, epochs=s.pretrain_epochs, seed=s.seed)
     return dataclasses.replace(run, model=model, flips=s.pretrain_flips, threads=s.threads,
-                               precision=s.precision)  # fmt: skip
+                               precision=s.precision, device=s.device)  # fmt: skip
 
 
 def held_out_instances(target: Path) -> np.ndarray:

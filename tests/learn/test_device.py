@@ -40,9 +40,9 @@ def test_absent_gpu_refused_before_any_work(tiny_dataset, tiny_run, tmp_path):
 def test_gpu_index_beyond_the_machine_refused(monkeypatch):
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
     monkeypatch.setattr(torch.cuda, "device_count", lambda: 2)
-    check_device(RunConfig(device="cuda:1"))
+    check_device("cuda:1")
     with pytest.raises(ConfigError, match=r"has 2 GPU\(s\).*Fix"):
-        check_device(RunConfig(device="cuda:2"))
+        check_device("cuda:2")
 
 
 def test_run_resumes_on_another_device(tiny_dataset, tiny_run, tmp_path):
