@@ -11,14 +11,12 @@ With the full plan a missing network is trained by ``learn.experiments.models.en
 from __future__ import annotations
 
 import dataclasses
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from learn.experiments.robustness_data import KEY_SUBSET, stream
-from learn.run_config import DEVICE_PATTERN
 from tactile.errors import ConfigError
 
 SEG_ARCHS = ("segnet", "fcn16s")
@@ -33,8 +31,9 @@ class TrainPlan:
     all). flips : the paper's threefold flip augmentation. seg_width : channel multiplier
     of the segmenter (None: the preset's). input_size : (h, w) px (None: preset). suffix :
     appended to the model folder name, so plans never reuse each other's networks. device :
-    where they train ("cpu", "cuda", "cuda:N"); a network already trained is reused wherever
-    it trained.
+    where they train ("cpu", "cuda", "cuda:N"; checked with the other inputs, before any work,
+    by ``robustness_setup.check_inputs``); a network already trained is reused wherever it
+    trained.
     """
 
     epochs: int | None = None
@@ -52,9 +51,6 @@ class TrainPlan:
         if min(n for n in (self.n_train, self.seg_n_train, 2) if n is not None) < 2:
             raise ConfigError(f"training samples must be >= 2, got {self.n_train}, "
                               f"{self.seg_n_train}")  # fmt: skip
-        if not re.fullmatch(DEVICE_PATTERN, self.device):
-            raise ConfigError(f"device {self.device!r} is not a training device. Fix: --device "
-                              "cpu, cuda or cuda:N")  # fmt: skip
 
     def samples(self, arch: str) -> int | None:
         """Train samples used for ``arch`` (None: all)."""
