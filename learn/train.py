@@ -270,7 +270,8 @@ def fit(
               ema=ema)
         if out is not None:
             title = f"{run.model.arch}, seed {run.train.seed}"
-            plot_history(history, out / "curves.png", title, metric_name(run.task))
+            best_epoch = next((h["epoch"] for h in history if h.get("val_metric") == best), None)
+            plot_history(history, out / "curves.png", title, metric_name(run.task), best_epoch)
         if patience_out(history, run):
             break
         if stop_after_epoch is not None and epoch + 1 >= stop_after_epoch:
