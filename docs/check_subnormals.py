@@ -6,19 +6,22 @@ Counts, per tensor of the checkpoint's model, the float32 values that are subnor
 below 1.2e-38 in magnitude). Then, on one torch thread, times a training step (batch 64 of
 seeded random images at the model's input size, SGD with momentum, cross-entropy) and the fast
 CPU inference path (``learn.fastpath``, ms per image at batch 1), with subnormals kept (IEEE 754
-gradual underflow) and flushed to zero (``learn.numerics``, handskin's setting). One thread, so
-switching the mode of this thread switches it for every operation timed.
+gradual underflow) and flushed to zero (``learn.numerics.flushing``, handskin's setting). One
+thread, so the mode of this thread is the mode of every operation timed.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import time
 
 import torch
 
 from learn.checkpoint import load_checkpoint, model_from_checkpoint
-from learn.fastpath import cpu_ms_per_image, fast_inference
+from learn.fastpath import fast_inference
+from learn.metrics import time_per_image
+from learn.numerics import flushing
 
 
 def subnormal_counts(state: dict[str, torch.Tensor]) -> dict[str, tuple[int, int]]:
@@ -67,11 +70,12 @@ def main() -> None:
         print(f"  {name:32s} {n:8,d} of {size:9,d} ({100 * n / size:.1f} %)")
     rows = {}
     for flush in (False, True):
-        torch.set_flush_denormal(flush)
         model, run = model_from_checkpoint(load_checkpoint(args.checkpoint))
-        size = tuple(run.model.input_size)
-        rows[flush] = (cpu_ms_per_image(fast_inference(model), size, n_runs=args.runs),
-                       seconds_per_step(model, size, args.steps))  # fmt: skip
+        fast, size = fast_inference(model), tuple(run.model.input_size)
+        with flushing() if flush else contextlib.nullcontext():
+            # time_per_image itself flushes (learn.numerics): its undecorated body here
+            ms = 1e3 * time_per_image.__wrapped__(fast, size, n_warmup=20, n_runs=args.runs)
+            rows[flush] = (ms, seconds_per_step(model, size, args.steps))
         label = "flushed to zero" if flush else "kept (IEEE)"
         print(f"subnormals {label:16s}: fast path {rows[flush][0]:7.2f} ms/image, "
               f"training step (batch 64) {rows[flush][1]:6.3f} s, 1 thread")

@@ -23,6 +23,7 @@ from learn.experiments import paper
 from learn.fastpath import cpu_ms_per_image, fast_inference, gpu_ms_per_image
 from learn.inputs import unpressed_as_background
 from learn.models import prepare_for_inference
+from learn.numerics import flushing
 from learn.tta import FlipTTA
 from tactile.errors import ConfigError
 
@@ -61,6 +62,7 @@ def scores(cm: torch.Tensor) -> dict[str, float]:
     return {"accuracy": M.accuracy(cm), **M.segmentation_scores(cm)}
 
 
+@flushing()
 def evaluate_tensors(
     model: nn.Module, data, num_classes: int, batch_size: int = 64,
     loss_fn: nn.Module | None = None, keep_predictions: bool = False,

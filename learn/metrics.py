@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from learn.numerics import flushing
 from tactile.errors import DataError
 
 ArrayLike = np.ndarray | torch.Tensor
@@ -120,6 +121,7 @@ def segmentation_scores(cm: ArrayLike) -> dict[str, float]:
     }
 
 
+@flushing()
 def time_per_image(
     model: nn.Module,
     input_size: tuple[int, int] = (68, 100),

@@ -30,6 +30,7 @@ from learn.fastpath import fast_inference
 from learn.folder import is_dataset, read_grey
 from learn.inputs import input_canvas, labels_on_map, net_input
 from learn.int8_file import is_int8
+from learn.numerics import flushing
 from learn.quantize import int8_from_checkpoint
 from learn.tta import FlipTTA
 from tactile.dataset.reader import DatasetReader
@@ -58,7 +59,7 @@ class Predictor:
         only with a canvas), made into the network input: (C,) or (C, h, w)."""
         x = net_input(np.asarray(image, np.float32) / 255.0, self.input_size, self.task,
                       self.canvas(step_mm))  # fmt: skip
-        with torch.inference_mode():
+        with torch.inference_mode(), flushing():
             return self.model(torch.from_numpy(x)[None, None])[0].float()
 
 

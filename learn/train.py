@@ -42,6 +42,7 @@ from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
 from learn.losses import SegmentationLoss
 from learn.models import create_model
+from learn.numerics import flushing
 from learn.run_config import (  # noqa: F401 (re-exported: learn.train is where runs are made)
     PRECISIONS,
     TASK_OF_ARCH,
@@ -307,6 +308,7 @@ def _check_stop(stop_after_epoch: int | None, start: int, epochs: int, last: Pat
         )
 
 
+@flushing()
 def _one_epoch(model, data: Data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool,
                scored: nn.Module | None = None):  # fmt: skip
     """Train one epoch and validate ``scored`` (default ``model``; the weight average when there
