@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-import learn.numerics  # noqa: F401 (subnormals flushed before torch's threads start)
+import learn.numerics  # noqa: F401 (torch's worker threads start flushing subnormals)
 from learn.inputs import INPUTS
 from tactile.errors import ConfigError, DataError
 

@@ -13,7 +13,7 @@ from collections.abc import Callable
 import torch
 from torch import nn
 
-import learn.numerics  # noqa: F401 (subnormals flushed before torch's threads start)
+import learn.numerics  # noqa: F401 (torch's worker threads start flushing subnormals)
 from learn.models.blocks import fold_batch_norm
 from learn.models.fcn import FCN16s
 from learn.models.handsnet import HandsNet
