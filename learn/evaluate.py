@@ -25,6 +25,7 @@ from learn.inputs import unpressed_as_background
 from learn.models import prepare_for_inference
 from learn.numerics import flushing
 from learn.tta import FlipTTA
+from tactile.dataset.reader import DATASET
 from tactile.errors import ConfigError
 
 
@@ -206,7 +207,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     )
     from learn.cluster_bootstrap import grouped_mean_iou_interval, sample_groups
     from learn.ensemble import MeanSoftmax
-    from learn.folder import group_ids, is_dataset, materialize, open_split
+    from learn.folder import group_ids, is_dataset
     from learn.significance import mean_iou_interval, per_image_confusion
 
     first, run = members[0], members[0].run
@@ -219,9 +220,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
 
     ckpt = first.ckpt
     hand = hand_classes or (ckpt.get("data") or {}).get("hand_classes")
-    split = open_split(Path(data_path), "test", run.task, run.model.input_size, hand,
-                       run.train.seed, run.model.canvas_mm)  # fmt: skip
-    test = materialize(split, "test")
+    split, test = read_test_split(Path(data_path), run, hand)
     n_cls = run.model.num_classes
     on_dataset = is_dataset(data_path)
     classify_data = run.task == "classify" and on_dataset
@@ -291,6 +290,40 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "tta_views": views and views[0],
            "int8": int8_note if int8 else None}  # fmt: skip
     return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
+
+
+def read_test_split(data_path: Path, run, hand_classes) -> tuple:
+    """(un-flipped test ``Dataset``, its ``TensorData`` in memory) of ``data_path`` as ``run``
+    (a ``RunConfig``) reads it. The last one read is kept, so the rows of one ``handskin
+    evaluate`` that share task, input size, canvas (and, for an image folder, hand classes and
+    seed) read the split once; the key holds the files' size and modification time, so data
+    rewritten in between is read afresh."""
+    from learn.folder import is_dataset, materialize, open_split
+
+    on_dataset = is_dataset(data_path)
+    stamp = tuple((str(f), f.stat().st_mtime_ns, f.stat().st_size) for f in _data_files(data_path))
+    folder_only = None if on_dataset else (hand_classes and tuple(hand_classes), run.train.seed)
+    key = (str(Path(data_path).resolve()), stamp, run.task, tuple(run.model.input_size),
+           run.model.canvas_mm and tuple(run.model.canvas_mm), folder_only)  # fmt: skip
+    if _TEST_SPLIT.get("key") != key:
+        _TEST_SPLIT.clear()  # free the last split before reading the next
+        split = open_split(data_path, "test", run.task, run.model.input_size, hand_classes,
+                           run.train.seed, run.model.canvas_mm)  # fmt: skip
+        _TEST_SPLIT.update(key=key, value=(split, materialize(split, "test")))
+    return _TEST_SPLIT["value"]
+
+
+_TEST_SPLIT: dict = {}  # key, (split, tensors) of the last test split read
+
+
+def _data_files(path: Path) -> list[Path]:
+    """The files whose change means new data: a dataset's .h5 and the files beside it, or an
+    image folder's files."""
+    path = Path(path)
+    if path.is_file():
+        return [path]
+    files = path.iterdir() if (path / DATASET).is_file() else path.rglob("*")
+    return sorted(f for f in files if f.is_file())
 
 
 def _ensemble_fields(members: list, views: list | None, data_path: str | Path) -> dict:

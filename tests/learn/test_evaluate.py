@@ -26,6 +26,7 @@ from learn.evaluate import (
     evaluate_tensors,
     history_figure,
     plot_history,
+    read_test_split,
 )
 from learn.experiments import paper
 from learn.fastpath import fast_inference
@@ -236,6 +237,46 @@ def _model_and_test_split(ckpt_path, data):
     model, run = model_from_checkpoint(load_checkpoint(ckpt_path))
     split = open_split(data, "test", run.task, run.model.input_size, None, run.train.seed)
     return model, split, materialize(split, "test", False)
+
+
+def test_rows_of_one_evaluate_read_the_test_split_once(checkpoints, tiny_dataset, tmp_path,
+                                                       monkeypatch):
+    """Rows that share data and input read the test split once; the tensors equal a fresh read
+    (`open_split` + `materialize`); other data, another input size or a rewritten dataset
+    read afresh."""
+    import os
+    import shutil
+    from dataclasses import replace
+
+    import learn.folder
+    from learn.checkpoint import load_checkpoint, model_from_checkpoint
+
+    reads = []
+    real = learn.folder.materialize
+    monkeypatch.setattr(learn.folder, "materialize",
+                        lambda ds, *a, **k: reads.append(len(ds)) or real(ds, *a, **k))  # fmt: skip
+    copy = shutil.copytree(tiny_dataset, tmp_path / "copy")
+    _, run = model_from_checkpoint(load_checkpoint(checkpoints["handsnet"]))
+    _, fresh_split, fresh = _model_and_test_split(checkpoints["handsnet"], tiny_dataset)
+    n = len(reads)  # the fresh read above
+    split, got = read_test_split(copy, run, None)
+    assert len(reads) == n + 1
+    assert np.array_equal(split.indices, fresh_split.indices)
+    assert torch.equal(got.x, fresh.x) and torch.equal(got.y, fresh.y)
+    evaluate_checkpoint(checkpoints["handsnet"], copy, time_runs=2)
+    evaluate_checkpoint(checkpoints["handsnet"], copy, time_runs=2, tta=True)
+    assert len(reads) == n + 1  # two rows, no new read
+    bigger = replace(run, model=replace(run.model, input_size=(40, 60)))
+    _, other = read_test_split(copy, bigger, None)
+    assert len(reads) == n + 2 and other.x.shape[-2:] == (40, 60)
+    read_test_split(copy, run, None)
+    assert len(reads) == n + 3  # the cache holds the last split only
+    h5 = copy / "dataset.h5"
+    os.utime(h5, ns=(h5.stat().st_atime_ns, h5.stat().st_mtime_ns + 10**9))
+    read_test_split(copy, run, None)
+    assert len(reads) == n + 4  # rewritten data is read again
+    read_test_split(tiny_dataset, run, None)
+    assert len(reads) == n + 5
 
 
 def test_errors_most_confident_first_and_their_sheet(checkpoints, tiny_dataset, tmp_path):
