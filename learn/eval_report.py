@@ -86,8 +86,22 @@ def _names(paper_table: dict, ours: dict[str, dict]) -> list[str]:
     return names
 
 
+def _not_scored(title: str, kind: str, table: dict, columns: tuple[str, ...]) -> list[str]:
+    """The section of a task no row of the report has: one sentence with the paper's known
+    values (% but for ms/image) instead of a table of empty rows."""
+    cell = lambda c, v: f"{_fmt(v)} ms per image" if c == "ms/image" else f"{c} {_fmt(v)} %"  # noqa: E731
+    known = [f"{name} " + ", ".join(cell(c, v) for c, v in zip(columns, vals, strict=True)
+                                    if v is not None)
+             for name, vals in table.items() if any(v is not None for v in vals)]  # fmt: skip
+    paper = f" The paper's values: {'; '.join(known)}." if known else ""
+    return [f"## {title}", "", f"No {kind} was scored in this report.{paper}"]
+
+
 def _table3(rows: list[dict]) -> list[str]:
     ours = _ours(rows, "classify")
+    if not ours:
+        return _not_scored("Hand / non-hand classification (paper: Table 3)", "classifier",
+                           PAPER_TABLE3, ("accuracy", "ms/image"))  # fmt: skip
     out = ["## Hand / non-hand classification (paper: Table 3)", "",
            "| method | accuracy % (ours) | CPU ms/image (ours, batch 1) | accuracy % (paper) "
            "| ms/image (paper) | trained on |", "|---|---|---|---|---|---|"]  # fmt: skip
@@ -104,6 +118,9 @@ def _table3(rows: list[dict]) -> list[str]:
 
 def _table8(rows: list[dict]) -> list[str]:
     ours = _ours(rows, "segment")
+    if not ours:
+        return _not_scored("Hand-part segmentation (paper: Table 8)", "segmenter", PAPER_TABLE8,
+                           ("Acc", "mAcc", "mIoU", "fwIoU", "ms/image"))  # fmt: skip
     out = ["## Hand-part segmentation (paper: Table 8)", "",
            "| method | Acc % | mAcc % | mIoU % | fwIoU % | CPU ms/image (fast path) "
            "| paper Acc % | paper mAcc % | paper mIoU % | paper fwIoU % | paper ms/image "

@@ -159,6 +159,26 @@ def test_report_tells_models_of_one_method_apart(checkpoints, tiny_dataset, tmp_
     assert ", b |" in same.read_text()  # same data too: the run folder tells them apart
 
 
+def test_report_of_one_task_states_the_other_tasks_paper_values(checkpoints, tiny_dataset,
+                                                                 tmp_path):
+    """A classifier-only report gives Table 8 as one sentence with the paper's SegNet values,
+    not a table of rows that were not run; a segmenter-only one does the same for Table 3."""
+    for arch, empty, values, absent, listed in (
+            ("handsnet", "No segmenter was scored",
+             (paper.SEGNET_ACC_PCT, paper.SEGNET_MIOU_PCT, paper.SEGNET_MS_PER_IMAGE),
+             ("| SegNet |", "| FCN |"), "| BoVW | not run |"),
+            ("segnet", "No classifier was scored",
+             (paper.HANDSNET_ACCURACY_PCT, paper.HANDSNET_MS_PER_IMAGE),
+             ("| HandsNet |", "| VGG16 fine-tuned |", "| BoVW |"),
+             "| FCN | not run |")):  # fmt: skip
+        row = evaluate_checkpoint(checkpoints[arch], tiny_dataset, time_runs=2)
+        text = write_report([row], tmp_path / f"{arch}.md").read_text()
+        (line,) = [ln for ln in text.splitlines() if ln.startswith(empty)]
+        assert all(f"{v:.2f}" in line for v in values), line
+        assert not any(a in text for a in absent)  # no rows for the task nothing was run of
+        assert listed in text  # the scored task still lists the paper's other methods
+
+
 def test_plot_history(tmp_path):
     hist = [{"epoch": 1, "train_loss": 1.0, "val_loss": 0.9, "val_metric": 0.6},
             {"epoch": 2, "train_loss": 0.5, "val_loss": 0.7, "val_metric": 0.8}]  # fmt: skip
