@@ -13,7 +13,8 @@ The mode (flush-to-zero and denormals-are-zero) belongs to each CPU thread:
 - the calling thread also runs numpy, scipy, trimesh and MuJoCo code (``sim``, ``tactile``),
   which must keep IEEE 754 arithmetic (a KD-tree build in ``sim.placement`` crashed under the
   flush mode), so it flushes only inside :func:`flushing` (training epochs, evaluation,
-  timing, prediction use it).
+  timing, prediction, int8 calibration and VGG16 features use it;
+  ``tests/learn/test_flushing_paths.py`` checks each).
 
 A program that starts torch's threads before importing ``learn`` keeps IEEE workers; call
 ``start_flushing_workers()`` first to change that.

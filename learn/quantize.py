@@ -27,6 +27,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from learn.numerics import flushing
 from tactile.errors import ConfigError
 
 #: The quantized engine whose int8 kernels run on AVX2 CPUs (and on AVX-512 / AMX ones).
@@ -137,7 +138,7 @@ def _observed_and_converted(body: nn.Module, calibration: torch.Tensor,
         # needs torch.compile; the FX path runs eagerly with the same oneDNN kernels.
         warnings.simplefilter("ignore", (DeprecationWarning, FutureWarning, UserWarning))
         prepared = prepare_fx(body, mapping, (calibration[:1],))
-        with torch.no_grad():
+        with torch.no_grad(), flushing():  # a trained net may hold subnormal weights
             for batch in calibration.split(CALIBRATION_BATCH):
                 prepared(batch.float())
         return convert_fx(prepared)

@@ -13,6 +13,7 @@ from sklearn.svm import LinearSVC
 from learn.classical import LinearSvm
 from learn.config import VggSvmConfig
 from learn.models.vgg import VGGClassifier
+from learn.numerics import flushing
 from tactile.config import from_dict
 from tactile.errors import ConfigError, DataError
 
@@ -35,6 +36,7 @@ def images_to_tensor(images: Images, in_channels: int = 1) -> torch.Tensor:
 
 
 @torch.no_grad()
+@flushing()  # a trained VGG16 may hold subnormal weights
 def extract_features(
     model: VGGClassifier,
     images: Images,

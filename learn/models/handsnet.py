@@ -6,6 +6,7 @@ import torch
 from torch import nn
 
 from learn.models.blocks import ConvBNReLU, init_weights
+from learn.numerics import flushing
 from tactile.errors import ConfigError
 
 #: (output channels, kernel size, dropout after the block's pooling) of the 4 conv blocks.
@@ -65,6 +66,7 @@ class HandsNet(nn.Module):
         if zero_init_output:
             nn.init.zeros_(self.classifier[-1].weight)
 
+    @flushing()  # every pass of a learn/ network flushes subnormals (learn.numerics)
     def _flat_size(self) -> int:
         """Length of the flattened feature map for ``input_size`` (found by a dry run)."""
         try:
