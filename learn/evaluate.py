@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -27,6 +28,12 @@ from learn.numerics import flushing
 from learn.tta import FlipTTA
 from tactile.dataset.reader import DATASET
 from tactile.errors import ConfigError
+
+if TYPE_CHECKING:
+    from torch.utils.data import Dataset
+
+    from learn.folder import TensorData
+    from learn.run_config import RunConfig
 
 
 @dataclass
@@ -292,7 +299,8 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
 
 
-def read_test_split(data_path: Path, run, hand_classes) -> tuple:
+def read_test_split(data_path: Path, run: RunConfig,
+                    hand_classes: tuple[str, ...] | None) -> tuple[Dataset, TensorData]:
     """(un-flipped test ``Dataset``, its ``TensorData`` in memory) of ``data_path`` as ``run``
     (a ``RunConfig``) reads it. The last one read is kept, so the rows of one ``handskin
     evaluate`` that share task, input size, canvas (and, for an image folder, hand classes and
