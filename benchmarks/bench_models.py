@@ -5,11 +5,13 @@
 Prints, for each registered model at its default width, its `handskin train` preset's width
 (`learn.config`: 0.25 for VGG16, SegNet and FCN-16s) and any extra ``--widths``, the
 parameter count and the median ms / image with 1 and 2 CPU threads, as built (eval mode) and
-after ``prepare_for_inference`` (batch norm folded, channels-last), against the targets of the
-learning issue (HandsNet ≤ 3 ms, SegNet ≤ 60 ms per image on one CPU core, judged on the
-prepared model). Then the ensemble of the CPU segmenter presets (SegNet and FCN-16s at width
-0.25, the mean of their softmax: ``handskin evaluate --ensemble``), with and without test-time
-flips, prepared, against the same SegNet target. Then HandsNet as an int8 network
+after ``prepare_for_inference`` (batch norm folded, channels-last), and that float path compiled
+by TorchInductor with frozen weights (``learn.compiled``, ``handskin evaluate --compile``;
+"n/a" where it cannot compile), against the targets of the learning issue (HandsNet ≤ 3 ms,
+SegNet ≤ 60 ms per image on one CPU core, judged on the faster of prepared and compiled).
+Then the ensemble of the CPU segmenter presets (SegNet and FCN-16s at width 0.25, the mean of
+their softmax: ``handskin evaluate --ensemble``), with and without test-time flips, prepared
+and compiled, against the same SegNet target. Then HandsNet as an int8 network
 (``learn.quantize``, oneDNN; activation ranges from 64 seeded sparse random images, which set
 the scales but not the kernels' speed) against the prepared float one and the same target.
 Figures are printed, never asserted: they depend on the machine and its load.
@@ -23,7 +25,9 @@ import inspect
 import torch
 
 from learn import config as C
+from learn.compiled import CompileUnavailable, compiled_ms_per_image
 from learn.ensemble import MeanSoftmax
+from learn.fastpath import fast_inference
 from learn.metrics import time_per_image
 from learn.models import MODELS, count_parameters, create_model, prepare_for_inference
 from learn.quantize import int8_supported, quantize_int8
@@ -43,7 +47,8 @@ def default_width(arch: str) -> float | None:
 
 
 def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int) -> str:
-    """One printed row: arch, width, parameters, ms / image at 1 and 2 threads (and GPU)."""
+    """One printed row: arch, width, parameters, ms / image at 1 and 2 threads as built,
+    prepared and compiled (and GPU)."""
     kw = {"input_size": size} if arch == "handsnet" else {"width": width}
     model = create_model(arch, **kw).eval()
     fast = prepare_for_inference(model)
@@ -52,21 +57,29 @@ def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int) 
         for threads in (1, 2):
             torch.set_num_threads(threads)
             cells.append(1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs))
+    for threads in (1, 2):
+        try:
+            cells.append(compiled_ms_per_image(fast_inference(model, bf16=False), size, threads,
+                                               runs)[0])  # fmt: skip
+        except CompileUnavailable:
+            cells.append(float("nan"))
     gpu = ""
     if torch.cuda.is_available():
         gpu = f"  gpu {1e3 * time_per_image(model, size, 'cuda', n_runs=runs):7.2f}"
     target = TARGET_MS_ONE_CORE.get(arch)
     verdict = ""
     if target is not None:
-        verdict = f"  target ≤ {target:g}: {'ok' if cells[2] <= target else 'MISSED'}"
+        best, path = min((cells[2], "prepared"), (cells[4], "compiled"),
+                         key=lambda c: c[0] if c[0] == c[0] else float("inf"))  # NaN: n/a
+        verdict = f"  target ≤ {target:g}: {'ok' if best <= target else 'MISSED'} ({path})"
     w = "fixed" if width is None else f"{width:g}"
-    times = "".join(f"{c:9.2f}" for c in cells)
+    times = "".join(f"{c:9.2f}" if c == c else f"{'n/a':>9s}" for c in cells)
     return f"{arch:9s} {w:>6s} {count_parameters(model):>12,d}{times}{gpu}{verdict}"
 
 
 def bench_ensemble(size: tuple[int, int], runs: int, width: float = 0.25) -> list[str]:
-    """Printed rows: SegNet + FCN-16s (mean softmax) at ``width``, prepared, 1 and 2 threads,
-    without and with test-time flips, against the SegNet target on one core."""
+    """Printed rows: SegNet + FCN-16s (mean softmax) at ``width``, prepared and compiled, 1 and
+    2 threads, without and with test-time flips, against the SegNet target on one core."""
     members = [prepare_for_inference(create_model(a, width=width).eval())
                for a in ("segnet", "fcn16s")]  # fmt: skip
     rows = []
@@ -76,10 +89,17 @@ def bench_ensemble(size: tuple[int, int], runs: int, width: float = 0.25) -> lis
         for threads in (1, 2):
             torch.set_num_threads(threads)
             cells.append(1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs))
+        for threads in (1, 2):
+            try:
+                cells.append(compiled_ms_per_image(net, size, threads, runs)[0])
+            except CompileUnavailable:
+                cells.append(float("nan"))
         target = TARGET_MS_ONE_CORE["segnet"]
+        best = min(c for c in (cells[0], cells[2]) if c == c)  # NaN: not compiled
         rows.append(f"segnet+fcn16s {name:10s} w{width:g}: prep 1 {cells[0]:7.2f}, prep 2 "
-                    f"{cells[1]:7.2f}  target ≤ {target:g}: "
-                    f"{'ok' if cells[0] <= target else 'MISSED'} ({cells[0] / target:.2f} of it)")
+                    f"{cells[1]:7.2f}, comp 1 {cells[2]:7.2f}, comp 2 {cells[3]:7.2f}  target "
+                    f"≤ {target:g}: {'ok' if best <= target else 'MISSED'} ({best / target:.2f} "
+                    f"of it)")
     return rows
 
 
@@ -110,9 +130,9 @@ def main() -> None:
     size = tuple(args.size)
     print(f"input 1 × 1 × {size[0]} × {size[1]}, batch 1, median of {args.runs} runs, torch "
           f"{torch.__version__}")
-    print("ms / image: as built (1 thread, 2 threads), prepared (1 thread, 2 threads)")
+    print("ms / image: as built, prepared, compiled (each 1 thread, 2 threads)")
     print(f"{'model':9s} {'width':>6s} {'parameters':>12s}" + "".join(
-        f"{h:>9s}" for h in ("built 1", "built 2", "prep 1", "prep 2")))
+        f"{h:>9s}" for h in ("built 1", "built 2", "prep 1", "prep 2", "comp 1", "comp 2")))
     for arch in MODELS:
         widths = [default_width(arch)]
         if widths[0] is not None:

@@ -251,6 +251,10 @@ EnsembleOpt = _opt(bool, "Also score the mean softmax of all the networks (.pt) 
 Int8Opt = _opt(bool, "Also score each HandsNet (.pt) as an int8 network (oneDNN, activation "
                "ranges from 512 training images of --data), in a row of its own; on AVX2 CPUs "
                "about 1.5x faster per image than the float fast path.", "--int8")
+CompileOpt = _opt(bool, "Also time each network's float fast path compiled by TorchInductor "
+                  "(torch.compile, weights frozen; needs a C++ compiler): ms per image at batch "
+                  "1, shown in the tables when faster. Costs 5-20 s of compiling per row.",
+                  "--compile")  # fmt: skip
 
 
 def evaluate_command(
@@ -262,6 +266,7 @@ def evaluate_command(
     tta: EvalTtaOpt = False,
     ensemble: EnsembleOpt = False,
     int8: Int8Opt = False,
+    compiled: CompileOpt = False,
 ) -> None:
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
     from learn.checkpoint import load_checkpoint, versions
@@ -290,9 +295,11 @@ def evaluate_command(
         jobs += _ensemble_jobs(by_task, tta) if ensemble else []
         jobs += _int8_jobs(loaded) if int8 else []
         hand = _hand_classes(hand_classes)
-        rows = [evaluate_ensemble(c, data, hand_classes=hand, threads=threads, tta=t)
+        rows = [evaluate_ensemble(c, data, hand_classes=hand, threads=threads, tta=t,
+                                  compiled=compiled)
                 if isinstance(c, list) else
-                evaluate_checkpoint(c, data, hand_classes=hand, threads=threads, tta=t, int8=q)
+                evaluate_checkpoint(c, data, hand_classes=hand, threads=threads, tta=t, int8=q,
+                                    compiled=compiled)
                 for c, t, q in jobs]  # fmt: skip
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
@@ -301,6 +308,8 @@ def evaluate_command(
     for row in rows:
         if note := leakage_note(row.get("shared_with_training")):
             typer.echo(f"warning: {row['checkpoint']}: {note.replace('**', '')}", err=True)
+        if note := row.get("compile_note"):
+            typer.echo(f"warning: {row['checkpoint']}: not timed compiled: {note}", err=True)
     header = f"Data: `{data}`. Versions: {json.dumps(versions())}."
     for path in save_error_sheets(rows, data, report):
         typer.echo(f"picture written to {path}")

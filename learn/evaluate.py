@@ -19,6 +19,7 @@ from matplotlib.figure import Figure
 from torch import nn
 
 from learn import metrics as M
+from learn.compiled import CompileUnavailable, compiled_ms_per_image
 from learn.device import device_of
 from learn.experiments import paper
 from learn.fastpath import cpu_ms_per_image, fast_inference, gpu_ms_per_image
@@ -158,15 +159,19 @@ SEG_KEYS = ("pixel_accuracy", "mean_accuracy", "mean_iou", "fw_iou")
 
 def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                         hand_classes: tuple[str, ...] | None = None, threads: int = 1,
-                        time_runs: int = 100, tta: bool = False,
-                        int8: bool = False) -> dict:  # fmt: skip
+                        time_runs: int = 100, tta: bool = False, int8: bool = False,
+                        compiled: bool = False) -> dict:  # fmt: skip
     """Test-split metrics (float and fast path) and CPU ms/image (1 thread by default) of a
     checkpoint (a .pt file; a classical model.npz goes to ``learn.classical.evaluate_classical``);
     a JSON-able dict (one row of the report). ``tta``: every path, timing included, runs with
     test-time flips over the views the network was trained on (`learn.tta.FlipTTA`). ``int8``
     (HandsNet only): scores, breakdowns and timing are of its int8 copy (`learn.quantize`),
     calibrated on training images of ``data_path``; an int8 file (``handskin quantize``,
-    `learn.int8_file`) is scored as its saved int8 network, ``int8`` or not."""
+    `learn.int8_file`) is scored as its saved int8 network, ``int8`` or not. ``compiled``: also
+    time the float fast path compiled by TorchInductor (`learn.compiled`; ``ms_per_image``'s
+    ``"compiled"``, None when not asked, for int8, or when compiling fails, then
+    ``compile_note`` says why; ``compiled_agreement``: the fraction of 64 test images, or of
+    their pixels, on which its argmax equals the float fast path's)."""
     from learn.checkpoint import load_checkpoint, model_from_checkpoint
     from learn.ensemble import Member
 
@@ -180,12 +185,14 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     ckpt = load_checkpoint(ckpt_path)
     model, run = model_from_checkpoint(ckpt, int8_ok=True)
     return _evaluate_members([Member(Path(ckpt_path), ckpt, model, run)], data_path,
-                             hand_classes, threads, time_runs, tta, int8 or is_int8(ckpt))
+                             hand_classes, threads, time_runs, tta, int8 or is_int8(ckpt),
+                             compiled)  # fmt: skip
 
 
 def evaluate_ensemble(ckpt_paths: list[str | Path], data_path: str | Path, *,
                       hand_classes: tuple[str, ...] | None = None, threads: int = 1,
-                      time_runs: int = 100, tta: bool = False) -> dict:  # fmt: skip
+                      time_runs: int = 100, tta: bool = False,
+                      compiled: bool = False) -> dict:  # fmt: skip
     """`evaluate_checkpoint` of the mean softmax of two or more networks of one task
     (`learn.ensemble.MeanSoftmax`; with ``tta``, each member with its own test-time flips).
     The row's ``arch`` is ``"ensemble"``; ``members`` lists each network's checkpoint, arch,
@@ -193,14 +200,14 @@ def evaluate_ensemble(ckpt_paths: list[str | Path], data_path: str | Path, *,
     from learn.ensemble import load_members
 
     return _evaluate_members(load_members(ckpt_paths), data_path, hand_classes, threads,
-                             time_runs, tta)  # fmt: skip
+                             time_runs, tta, compiled=compiled)  # fmt: skip
 
 
 def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[str, ...] | None,
-                      threads: int, time_runs: int, tta: bool,
-                      int8: bool = False) -> dict:  # fmt: skip
+                      threads: int, time_runs: int, tta: bool, int8: bool = False,
+                      compiled: bool = False) -> dict:  # fmt: skip
     """The report row of one network or the mean of several (`learn.ensemble.Member` list);
-    ``int8``: of one HandsNet's int8 copy."""
+    ``int8``: of one HandsNet's int8 copy; ``compiled``: also timed compiled."""
     from learn.breakdown import (
         N_WORST_KEPT,
         N_WORST_MAPS,
@@ -266,7 +273,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     if int8:  # one path: the int8 network is its own fast path
         fast, res = model, ref
         t = cpu_ms_per_image(model, size, threads, time_runs)
-        ms = {"eval_mode": t, "prepared": t, "fast": t, "gpu": None}
+        ms = {"eval_mode": t, "prepared": t, "fast": t, "compiled": None, "gpu": None}
     else:
         fast = build(lambda m: fast_inference(m, check=test.x[:64]))
         res = evaluate_tensors(fast, test, n_cls)
@@ -276,13 +283,22 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
         ms = {"eval_mode": cpu_ms_per_image(model, size, threads, time_runs),
               "prepared": cpu_ms_per_image(build(prepare_for_inference), size, threads,
                                            time_runs),
-              "fast": cpu_ms_per_image(fast, size, threads, time_runs),
+              "fast": cpu_ms_per_image(fast, size, threads, time_runs), "compiled": None,
               "gpu": gpu_ms_per_image(model, size)}  # fmt: skip
+    compile_note = agree = None
+    if compiled and not int8:  # timed at batch 1; its argmax checked on 64 test images
+        try:
+            ms["compiled"], agree = compiled_ms_per_image(
+                build(lambda m: fast_inference(m, bf16=False)), size, threads, time_runs,
+                test.x[:64])
+        except CompileUnavailable as err:
+            compile_note = str(err)
     row = {"checkpoint": str(first.path), "arch": run.model.arch, "task": run.task,
            "epoch": ckpt["epoch"], "class_names": list(ckpt.get("class_names", [])),
            "n_test": len(test.y), "cm": ref.cm.tolist(), "metrics": ref.metrics,
            "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
-           "ms_per_image": ms, "threads": threads, "seed": ckpt.get("seed"),
+           "ms_per_image": ms, "compiled_agreement": agree, "compile_note": compile_note,
+           "threads": threads, "seed": ckpt.get("seed"),
            "config": ckpt["config"], "input_size": list(size),
            "canvas_mm": run.model.canvas_mm and list(run.model.canvas_mm),
            "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
