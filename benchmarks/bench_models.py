@@ -14,7 +14,10 @@ their softmax: ``handskin evaluate --ensemble``), with and without test-time fli
 and compiled, against the same SegNet target. Then HandsNet as an int8 network
 (``learn.quantize``, oneDNN; activation ranges from 64 seeded sparse random images, which set
 the scales but not the kernels' speed) against the prepared float one and the same target.
-Figures are printed, never asserted: they depend on the machine and its load.
+Each figure is the least, over ``--rounds`` rounds in which a row's paths take turns, of the
+median of ``--runs`` runs: a shared machine's slow spells (1.5x on HandsNet within minutes, seen
+here) then weigh on every path of a row alike. Figures are printed, never asserted: they depend
+on the machine and its load.
 """
 
 from __future__ import annotations
@@ -23,13 +26,15 @@ import argparse
 import inspect
 
 import torch
+from torch import nn
 
 from learn import config as C
-from learn.compiled import CompileUnavailable, compiled_ms_per_image
+from learn.compiled import CompileUnavailable, compile_for_cpu
 from learn.ensemble import MeanSoftmax
 from learn.fastpath import fast_inference
 from learn.metrics import time_per_image
 from learn.models import MODELS, count_parameters, create_model, prepare_for_inference
+from learn.numerics import flushing
 from learn.quantize import int8_supported, quantize_int8
 from learn.tta import PAPER_VIEWS, FlipTTA
 
@@ -46,23 +51,44 @@ def default_width(arch: str) -> float | None:
     return None if param is None else param.default
 
 
-def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int) -> str:
+def timed(nets: list[nn.Module | None], size: tuple[int, int], runs: int, rounds: int,
+          threads: int) -> list[float]:  # fmt: skip
+    """ms / image of each network at ``threads`` threads: the least over ``rounds`` rounds of
+    the median of ``runs`` runs, the networks taking turns within each round, so that a slow
+    spell of a shared machine weighs on all of them alike; NaN for None (not compiled)."""
+    torch.set_num_threads(threads)
+    best = [float("nan") if n is None else float("inf") for n in nets]
+    for _ in range(rounds):
+        for i, net in enumerate(nets):
+            if net is not None:
+                ms = 1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs)
+                best[i] = min(best[i], ms)
+    return best
+
+
+def compiled_or_none(net: nn.Module, size: tuple[int, int], threads: int) -> nn.Module | None:
+    """``net`` compiled (``learn.compiled.compile_for_cpu``) at ``threads`` threads, or None
+    where it cannot compile. Compiling resets torch's compiler: use it before the next one."""
+    torch.set_num_threads(threads)
+    try:
+        with flushing():
+            return compile_for_cpu(net, torch.rand(1, 1, *size))
+    except CompileUnavailable:
+        return None
+
+
+def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int,
+              rounds: int) -> str:  # fmt: skip
     """One printed row: arch, width, parameters, ms / image at 1 and 2 threads as built,
     prepared and compiled (and GPU)."""
     kw = {"input_size": size} if arch == "handsnet" else {"width": width}
     model = create_model(arch, **kw).eval()
     fast = prepare_for_inference(model)
-    cells = []
-    for net in (model, fast):
-        for threads in (1, 2):
-            torch.set_num_threads(threads)
-            cells.append(1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs))
+    by_threads = {}
     for threads in (1, 2):
-        try:
-            cells.append(compiled_ms_per_image(fast_inference(model, bf16=False), size, threads,
-                                               runs)[0])  # fmt: skip
-        except CompileUnavailable:
-            cells.append(float("nan"))
+        compiled = compiled_or_none(fast_inference(model, bf16=False), size, threads)
+        by_threads[threads] = timed([model, fast, compiled], size, runs, rounds, threads)
+    cells = [by_threads[t][i] for i in range(3) for t in (1, 2)]
     gpu = ""
     if torch.cuda.is_available():
         gpu = f"  gpu {1e3 * time_per_image(model, size, 'cuda', n_runs=runs):7.2f}"
@@ -77,7 +103,8 @@ def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int) 
     return f"{arch:9s} {w:>6s} {count_parameters(model):>12,d}{times}{gpu}{verdict}"
 
 
-def bench_ensemble(size: tuple[int, int], runs: int, width: float = 0.25) -> list[str]:
+def bench_ensemble(size: tuple[int, int], runs: int, rounds: int,
+                   width: float = 0.25) -> list[str]:  # fmt: skip
     """Printed rows: SegNet + FCN-16s (mean softmax) at ``width``, prepared and compiled, 1 and
     2 threads, without and with test-time flips, against the SegNet target on one core."""
     members = [prepare_for_inference(create_model(a, width=width).eval())
@@ -85,40 +112,30 @@ def bench_ensemble(size: tuple[int, int], runs: int, width: float = 0.25) -> lis
     rows = []
     for name, net in (("mean", MeanSoftmax(members)),
                       ("mean+flips", MeanSoftmax([FlipTTA(m, PAPER_VIEWS) for m in members]))):
-        cells = []
-        for threads in (1, 2):
-            torch.set_num_threads(threads)
-            cells.append(1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs))
-        for threads in (1, 2):
-            try:
-                cells.append(compiled_ms_per_image(net, size, threads, runs)[0])
-            except CompileUnavailable:
-                cells.append(float("nan"))
+        cells = {t: timed([net, compiled_or_none(net, size, t)], size, runs, rounds, t)
+                 for t in (1, 2)}  # fmt: skip
         target = TARGET_MS_ONE_CORE["segnet"]
-        best = min(c for c in (cells[0], cells[2]) if c == c)  # NaN: not compiled
-        rows.append(f"segnet+fcn16s {name:10s} w{width:g}: prep 1 {cells[0]:7.2f}, prep 2 "
-                    f"{cells[1]:7.2f}, comp 1 {cells[2]:7.2f}, comp 2 {cells[3]:7.2f}  target "
-                    f"≤ {target:g}: {'ok' if best <= target else 'MISSED'} ({best / target:.2f} "
-                    f"of it)")
+        best = min(c for c in cells[1] if c == c)  # NaN: not compiled
+        rows.append(f"segnet+fcn16s {name:10s} w{width:g}: prep 1 {cells[1][0]:7.2f}, prep 2 "
+                    f"{cells[2][0]:7.2f}, comp 1 {cells[1][1]:7.2f}, comp 2 {cells[2][1]:7.2f}  "
+                    f"target ≤ {target:g}: {'ok' if best <= target else 'MISSED'} "
+                    f"({best / target:.2f} of it)")
     return rows
 
 
-def bench_int8(size: tuple[int, int], runs: int) -> str:
+def bench_int8(size: tuple[int, int], runs: int, rounds: int) -> str:
     """Printed row: HandsNet prepared (float) and int8, 1 and 2 threads, the int8 speed-up and
     the HandsNet target on one core."""
     if not int8_supported():
         return "handsnet int8: skipped, this PyTorch has no oneDNN quantized engine"
     model = create_model("handsnet", input_size=size).eval()
     calib = torch.rand(64, 1, *size, generator=torch.Generator().manual_seed(0)) ** 4
-    cells = []
-    for net in (prepare_for_inference(model), quantize_int8(model, calib)):
-        for threads in (1, 2):
-            torch.set_num_threads(threads)
-            cells.append(1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs))
+    nets = [prepare_for_inference(model), quantize_int8(model, calib)]
+    (f1, q1), (f2, q2) = (timed(nets, size, runs, rounds, t) for t in (1, 2))
     target = TARGET_MS_ONE_CORE["handsnet"]
-    return (f"handsnet float prep 1 {cells[0]:7.2f}, prep 2 {cells[1]:7.2f} | int8 1 "
-            f"{cells[2]:7.2f}, int8 2 {cells[3]:7.2f} | int8 {cells[0] / cells[2]:.2f}x faster "
-            f"on 1 core, target ≤ {target:g}: {'ok' if cells[2] <= target else 'MISSED'}")
+    return (f"handsnet float prep 1 {f1:7.2f}, prep 2 {f2:7.2f} | int8 1 {q1:7.2f}, int8 2 "
+            f"{q2:7.2f} | int8 {f1 / q1:.2f}x faster on 1 core, target ≤ {target:g}: "
+            f"{'ok' if q1 <= target else 'MISSED'}")
 
 
 def main() -> None:
@@ -126,10 +143,12 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=50, help="timed runs after 10 warm-up runs")
     parser.add_argument("--widths", type=float, nargs="*", default=[], help="extra widths")
     parser.add_argument("--size", type=int, nargs=2, default=(68, 100), help="H W in pixels")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="rounds of timing, paths taking turns; the least median is kept")
     args = parser.parse_args()
     size = tuple(args.size)
-    print(f"input 1 × 1 × {size[0]} × {size[1]}, batch 1, median of {args.runs} runs, torch "
-          f"{torch.__version__}")
+    print(f"input 1 × 1 × {size[0]} × {size[1]}, batch 1, least over {args.rounds} rounds of "
+          f"the median of {args.runs} runs, torch {torch.__version__}")
     print("ms / image: as built, prepared, compiled (each 1 thread, 2 threads)")
     print(f"{'model':9s} {'width':>6s} {'parameters':>12s}" + "".join(
         f"{h:>9s}" for h in ("built 1", "built 2", "prep 1", "prep 2", "comp 1", "comp 2")))
@@ -139,12 +158,12 @@ def main() -> None:
             extra = [PRESET_WIDTH.get(arch), *args.widths]
             widths += sorted({w for w in extra if w is not None} - set(widths), reverse=True)
         for width in widths:
-            print(bench_one(arch, width, size, args.runs), flush=True)
+            print(bench_one(arch, width, size, args.runs, args.rounds), flush=True)
     print("ensemble of the CPU segmenter presets, ms / image:")
-    for row in bench_ensemble(size, args.runs):
+    for row in bench_ensemble(size, args.runs, args.rounds):
         print(row, flush=True)
     print("HandsNet as an int8 network (oneDNN), ms / image:")
-    print(bench_int8(size, args.runs), flush=True)
+    print(bench_int8(size, args.runs, args.rounds), flush=True)
 
 
 if __name__ == "__main__":
