@@ -29,12 +29,11 @@ import torch
 from torch import nn
 
 from learn import config as C
-from learn.compiled import CompileUnavailable, compile_for_cpu
+from learn.compiled import CompileUnavailable, compile_at
 from learn.ensemble import MeanSoftmax
-from learn.fastpath import fast_inference
+from learn.fastpath import fast_inference, interleaved_cpu_ms
 from learn.metrics import time_per_image
 from learn.models import MODELS, count_parameters, create_model, prepare_for_inference
-from learn.numerics import flushing
 from learn.quantize import int8_supported, quantize_int8
 from learn.tta import PAPER_VIEWS, FlipTTA
 
@@ -53,26 +52,18 @@ def default_width(arch: str) -> float | None:
 
 def timed(nets: list[nn.Module | None], size: tuple[int, int], runs: int, rounds: int,
           threads: int) -> list[float]:  # fmt: skip
-    """ms / image of each network at ``threads`` threads: the least over ``rounds`` rounds of
-    the median of ``runs`` runs, the networks taking turns within each round, so that a slow
-    spell of a shared machine weighs on all of them alike; NaN for None (not compiled)."""
-    torch.set_num_threads(threads)
-    best = [float("nan") if n is None else float("inf") for n in nets]
-    for _ in range(rounds):
-        for i, net in enumerate(nets):
-            if net is not None:
-                ms = 1e3 * time_per_image(net, size, "cpu", n_warmup=10, n_runs=runs)
-                best[i] = min(best[i], ms)
-    return best
+    """ms / image of each network at ``threads`` threads (`learn.fastpath.interleaved_cpu_ms`:
+    the least over ``rounds`` rounds of the median of ``runs`` runs, the networks taking turns
+    within each round); NaN for None (not compiled)."""
+    ms = interleaved_cpu_ms(nets, size, threads, runs, rounds)
+    return [float("nan") if t is None else t for t in ms]
 
 
 def compiled_or_none(net: nn.Module, size: tuple[int, int], threads: int) -> nn.Module | None:
-    """``net`` compiled (``learn.compiled.compile_for_cpu``) at ``threads`` threads, or None
-    where it cannot compile. Compiling resets torch's compiler: use it before the next one."""
-    torch.set_num_threads(threads)
+    """``net`` compiled (``learn.compiled.compile_at``) at ``threads`` threads, or None where
+    it cannot compile. Compiling resets torch's compiler: use it before the next one."""
     try:
-        with flushing():
-            return compile_for_cpu(net, torch.rand(1, 1, *size))
+        return compile_at(net, size, threads)
     except CompileUnavailable:
         return None
 

@@ -255,6 +255,10 @@ CompileOpt = _opt(bool, "Also time each network's float fast path compiled by To
                   "(torch.compile, weights frozen; needs a C++ compiler): ms per image at batch "
                   "1, shown in the tables when faster. Costs 5-20 s of compiling per row.",
                   "--compile")  # fmt: skip
+TimeRunsOpt = _opt(int, "Timed batch-1 runs per inference path and round, after 10 warm-up runs "
+                   "(count); each path's time is the median of a round.")
+TimeRoundsOpt = _opt(int, "Rounds of timing in which a network's inference paths (eval mode, "
+                     "prepared, fast, compiled) take turns; the least median is kept (count).")
 
 
 def evaluate_command(
@@ -267,15 +271,18 @@ def evaluate_command(
     ensemble: EnsembleOpt = False,
     int8: Int8Opt = False,
     compiled: CompileOpt = False,
+    time_runs: TimeRunsOpt = 100,
+    time_rounds: TimeRoundsOpt = 3,
 ) -> None:
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
     from learn.checkpoint import load_checkpoint, versions
     from learn.classical import load_npz
     from learn.eval_report import report_json, save_error_sheets, write_report
-    from learn.evaluate import evaluate_checkpoint, evaluate_ensemble, tta_views
+    from learn.evaluate import check_timing, evaluate_checkpoint, evaluate_ensemble, tta_views
     from learn.train import run_from_dict
 
     try:
+        check_timing(time_runs, time_rounds, threads)
         _check_data(data)
         _refuse_repeats(checkpoints)
         jobs = []  # (checkpoint or list of them, with test-time flips, as int8)
@@ -295,11 +302,12 @@ def evaluate_command(
         jobs += _ensemble_jobs(by_task, tta) if ensemble else []
         jobs += _int8_jobs(loaded) if int8 else []
         hand = _hand_classes(hand_classes)
-        rows = [evaluate_ensemble(c, data, hand_classes=hand, threads=threads, tta=t,
-                                  compiled=compiled)
+        timing = {"threads": threads, "time_runs": time_runs}
+        rows = [evaluate_ensemble(c, data, hand_classes=hand, tta=t, compiled=compiled,
+                                  time_rounds=time_rounds, **timing)
                 if isinstance(c, list) else
-                evaluate_checkpoint(c, data, hand_classes=hand, threads=threads, tta=t, int8=q,
-                                    compiled=compiled)
+                evaluate_checkpoint(c, data, hand_classes=hand, tta=t, int8=q,
+                                    compiled=compiled, time_rounds=time_rounds, **timing)
                 for c, t, q in jobs]  # fmt: skip
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err

@@ -28,7 +28,7 @@ import torch
 import torch._inductor.config as inductor_config
 from torch import nn
 
-from learn import metrics as M
+from learn.fastpath import interleaved_cpu_ms
 from learn.numerics import flushing
 from tactile.errors import HandskinError
 
@@ -59,6 +59,28 @@ def compile_for_cpu(net: nn.Module, example: torch.Tensor) -> nn.Module:
     return compiled
 
 
+def compiled_agreement(compiled: nn.Module, net: nn.Module, check: torch.Tensor) -> float:
+    """Fraction of ``check`` images (``(N, C, H, W)``, run one at a time as the compiled network
+    was compiled at batch 1) on which ``compiled``'s argmax (per image, or per pixel for
+    segmenters) equals ``net``'s."""
+    with torch.inference_mode(), flushing():
+        same = [(compiled(x[None]).argmax(1) == net(x[None]).argmax(1)).double().mean()
+                for x in check]  # fmt: skip
+    return float(torch.stack(same).mean())
+
+
+def compile_at(net: nn.Module, input_size: tuple[int, int], threads: int = 1) -> nn.Module:
+    """``compile_for_cpu`` of ``net`` on a batch-1 example of ``input_size`` (H, W) px, compiled
+    at ``threads`` torch threads (the caller's count is restored). Raises
+    ``CompileUnavailable``."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        return compile_for_cpu(net, torch.rand(1, getattr(net, "in_channels", 1), *input_size))
+    finally:
+        torch.set_num_threads(before)
+
+
 def compiled_ms_per_image(net: nn.Module, input_size: tuple[int, int], threads: int = 1,
                           n_runs: int = 100, check: torch.Tensor | None = None,
                           ) -> tuple[float, float | None]:  # fmt: skip
@@ -67,20 +89,11 @@ def compiled_ms_per_image(net: nn.Module, input_size: tuple[int, int], threads: 
     fraction of ``check`` images (``(N, C, H, W)``, run one at a time) on which the compiled
     network's argmax (per image, or per pixel for segmenters) equals ``net``'s, None without
     ``check``. The compiled code is dropped afterwards. Raises ``CompileUnavailable``."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(threads)
+    compiled = compile_at(net, input_size, threads)
     try:
-        example = torch.rand(1, getattr(net, "in_channels", 1), *input_size)
-        compiled = compile_for_cpu(net, example)
-        with flushing():
-            ms = 1e3 * M.time_per_image(compiled, input_size, "cpu", n_warmup=20, n_runs=n_runs)
-            agree = None
-            if check is not None and len(check):
-                with torch.inference_mode():
-                    same = [(compiled(x[None]).argmax(1) == net(x[None]).argmax(1)).double().mean()
-                            for x in check]  # fmt: skip
-                agree = float(torch.stack(same).mean())
-        torch.compiler.reset()
+        (ms,) = interleaved_cpu_ms([compiled], input_size, threads, n_runs, rounds=1, n_warmup=20)
+        agree = None if check is None or not len(check) else compiled_agreement(compiled, net,
+                                                                                 check)  # fmt: skip
         return ms, agree
     finally:
-        torch.set_num_threads(before)
+        torch.compiler.reset()

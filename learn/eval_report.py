@@ -407,12 +407,25 @@ def report_json(rows: list[dict]) -> str:
                             + "]", json.dumps(rows, indent=1))  # fmt: skip
 
 
+def _timing_rule(rows: list[dict]) -> str:
+    """How the networks' times per image were taken: interleaved rounds (``time_rounds`` in the
+    rows), or for rows from before them, one median per path."""
+    specs = sorted({(r["time_runs"], r["time_rounds"]) for r in rows if r.get("time_rounds")})
+    if not specs:
+        return "median of 100 runs after 20 warm-up runs"
+    runs = " or ".join(f"{n}" for n in sorted({n for n, _ in specs}))
+    rounds = " or ".join(f"{k}" for k in sorted({k for _, k in specs}))
+    return (f"each inference path's median of {runs} runs after 10 warm-up runs, the least over "
+            f"{rounds} rounds in which a network's paths (eval mode, prepared, fast, compiled) "
+            f"take turns, so that a slow spell of the machine weighs on all of them alike")
+
+
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:
     """The markdown report: our rows next to the paper's Tables 3 and 8 ("paper" columns;
     "unknown" where we do not know the paper's value), then per-model details."""
     lines = ["# handskin evaluation", "", header, "",
              "Columns marked *paper* are Albini & Cannata (IJRR 2020); ours are on the test split "
-             "named above. Timing: median of 100 runs after 20 warm-up runs.", "",
+             f"named above. Timing: {_timing_rule(rows)}.", "",
              *_table3(rows), "", *_table8(rows), "", *_significance(rows), "## Details",
              ""]  # fmt: skip
     for r, label in zip(rows, row_labels(rows), strict=True):

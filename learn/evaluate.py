@@ -19,10 +19,10 @@ from matplotlib.figure import Figure
 from torch import nn
 
 from learn import metrics as M
-from learn.compiled import CompileUnavailable, compiled_ms_per_image
+from learn.compiled import CompileUnavailable, compile_at, compiled_agreement
 from learn.device import device_of
 from learn.experiments import paper
-from learn.fastpath import cpu_ms_per_image, fast_inference, gpu_ms_per_image
+from learn.fastpath import fast_inference, gpu_ms_per_image, interleaved_cpu_ms
 from learn.inputs import unpressed_as_background
 from learn.models import prepare_for_inference
 from learn.numerics import flushing
@@ -160,7 +160,7 @@ SEG_KEYS = ("pixel_accuracy", "mean_accuracy", "mean_iou", "fw_iou")
 def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
                         hand_classes: tuple[str, ...] | None = None, threads: int = 1,
                         time_runs: int = 100, tta: bool = False, int8: bool = False,
-                        compiled: bool = False) -> dict:  # fmt: skip
+                        compiled: bool = False, time_rounds: int = 3) -> dict:  # fmt: skip
     """Test-split metrics (float and fast path) and CPU ms/image (1 thread by default) of a
     checkpoint (a .pt file; a classical model.npz goes to ``learn.classical.evaluate_classical``);
     a JSON-able dict (one row of the report). ``tta``: every path, timing included, runs with
@@ -171,9 +171,13 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     time the float fast path compiled by TorchInductor (`learn.compiled`; ``ms_per_image``'s
     ``"compiled"``, None when not asked, for int8, or when compiling fails, then
     ``compile_note`` says why; ``compiled_agreement``: the fraction of 64 test images, or of
-    their pixels, on which its argmax equals the float fast path's)."""
+    their pixels, on which its argmax equals the float fast path's). Timing: each path's
+    median of ``time_runs`` runs at batch 1, the least over ``time_rounds`` rounds in which the
+    paths take turns (`learn.fastpath.interleaved_cpu_ms`)."""
     from learn.checkpoint import load_checkpoint, model_from_checkpoint
     from learn.ensemble import Member
+
+    check_timing(time_runs, time_rounds, threads)
 
     if Path(ckpt_path).suffix == ".npz":
         from learn.classical import evaluate_classical
@@ -186,26 +190,37 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
     model, run = model_from_checkpoint(ckpt, int8_ok=True)
     return _evaluate_members([Member(Path(ckpt_path), ckpt, model, run)], data_path,
                              hand_classes, threads, time_runs, tta, int8 or is_int8(ckpt),
-                             compiled)  # fmt: skip
+                             compiled, time_rounds)  # fmt: skip
 
 
 def evaluate_ensemble(ckpt_paths: list[str | Path], data_path: str | Path, *,
                       hand_classes: tuple[str, ...] | None = None, threads: int = 1,
                       time_runs: int = 100, tta: bool = False,
-                      compiled: bool = False) -> dict:  # fmt: skip
+                      compiled: bool = False, time_rounds: int = 3) -> dict:  # fmt: skip
     """`evaluate_checkpoint` of the mean softmax of two or more networks of one task
     (`learn.ensemble.MeanSoftmax`; with ``tta``, each member with its own test-time flips).
     The row's ``arch`` is ``"ensemble"``; ``members`` lists each network's checkpoint, arch,
     width, epoch, seed, training data and views."""
     from learn.ensemble import load_members
 
+    check_timing(time_runs, time_rounds, threads)
     return _evaluate_members(load_members(ckpt_paths), data_path, hand_classes, threads,
-                             time_runs, tta, compiled=compiled)  # fmt: skip
+                             time_runs, tta, compiled=compiled,
+                             time_rounds=time_rounds)  # fmt: skip
+
+
+def check_timing(time_runs: int, time_rounds: int, threads: int) -> None:
+    """A ``ConfigError`` naming the option unless runs, rounds and threads are each >= 1."""
+    for name, value in (("time runs", time_runs), ("time rounds", time_rounds),
+                        ("threads", threads)):  # fmt: skip
+        if not isinstance(value, int) or value < 1:
+            raise ConfigError(f"{name} must be a whole number >= 1, got {value!r}; fix: pass "
+                              f"--{name.replace(' ', '-')} 1 or more")  # fmt: skip
 
 
 def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[str, ...] | None,
                       threads: int, time_runs: int, tta: bool, int8: bool = False,
-                      compiled: bool = False) -> dict:  # fmt: skip
+                      compiled: bool = False, time_rounds: int = 3) -> dict:  # fmt: skip
     """The report row of one network or the mean of several (`learn.ensemble.Member` list);
     ``int8``: of one HandsNet's int8 copy; ``compiled``: also timed compiled."""
     from learn.breakdown import (
@@ -270,9 +285,10 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
                  "maps": pack_labels(pred[order[:N_WORST_MAPS]])}  # fmt: skip
         miou_interval = [*mean_iou_interval(cms), *grouped_mean_iou_interval(cms, groups)]
     size = run.model.input_size
+    compile_note = agree = compiled_net = None
     if int8:  # one path: the int8 network is its own fast path
         fast, res = model, ref
-        t = cpu_ms_per_image(model, size, threads, time_runs)
+        (t,) = interleaved_cpu_ms([model], size, threads, time_runs, time_rounds)
         ms = {"eval_mode": t, "prepared": t, "fast": t, "compiled": None, "gpu": None}
     else:
         fast = build(lambda m: fast_inference(m, check=test.x[:64]))
@@ -280,25 +296,26 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
         if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
             fast = build(lambda m: fast_inference(m, bf16=False))
             res = evaluate_tensors(fast, test, n_cls)
-        ms = {"eval_mode": cpu_ms_per_image(model, size, threads, time_runs),
-              "prepared": cpu_ms_per_image(build(prepare_for_inference), size, threads,
-                                           time_runs),
-              "fast": cpu_ms_per_image(fast, size, threads, time_runs), "compiled": None,
+        if compiled:  # at batch 1; its argmax checked on 64 test images, one at a time
+            float_path = build(lambda m: fast_inference(m, bf16=False))
+            try:
+                compiled_net = compile_at(float_path, size, threads)
+                agree = compiled_agreement(compiled_net, float_path, test.x[:64])
+            except CompileUnavailable as err:
+                compile_note = str(err)
+        paths = [model, build(prepare_for_inference), fast, compiled_net]
+        times = interleaved_cpu_ms(paths, size, threads, time_runs, time_rounds)  # paths in turn
+        ms = {**dict(zip(("eval_mode", "prepared", "fast", "compiled"), times, strict=True)),
               "gpu": gpu_ms_per_image(model, size)}  # fmt: skip
-    compile_note = agree = None
-    if compiled and not int8:  # timed at batch 1; its argmax checked on 64 test images
-        try:
-            ms["compiled"], agree = compiled_ms_per_image(
-                build(lambda m: fast_inference(m, bf16=False)), size, threads, time_runs,
-                test.x[:64])
-        except CompileUnavailable as err:
-            compile_note = str(err)
+        if compiled_net is not None:
+            torch.compiler.reset()  # drop the compiled code and its frozen weights
     row = {"checkpoint": str(first.path), "arch": run.model.arch, "task": run.task,
            "epoch": ckpt["epoch"], "class_names": list(ckpt.get("class_names", [])),
            "n_test": len(test.y), "cm": ref.cm.tolist(), "metrics": ref.metrics,
            "fast_metrics": res.metrics, "bf16": bool(getattr(fast, "bf16", False)),
            "ms_per_image": ms, "compiled_agreement": agree, "compile_note": compile_note,
-           "threads": threads, "seed": ckpt.get("seed"),
+           "threads": threads, "time_runs": time_runs, "time_rounds": time_rounds,
+           "seed": ckpt.get("seed"),
            "config": ckpt["config"], "input_size": list(size),
            "canvas_mm": run.model.canvas_mm and list(run.model.canvas_mm),
            "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),

@@ -2,10 +2,13 @@
 
 ``fast_inference`` folds batch norm, feeds channels-last input and stores the weights in bfloat16
 where this CPU has native bf16 and the predictions do not change; ``cpu_ms_per_image`` and
-``gpu_ms_per_image`` time a model at batch 1 after warm-up, as the paper's Tables 3 and 8.
+``gpu_ms_per_image`` time a model at batch 1 after warm-up, as the paper's Tables 3 and 8;
+``interleaved_cpu_ms`` times several inference paths of one network taking turns, so that a slow
+spell of a shared machine weighs on all of them alike.
 
     fast = fast_inference(model)                    # BN folded, channels-last, bf16 where safe
     ms = cpu_ms_per_image(fast, (68, 100), threads=1)
+    eval_ms, fast_ms = interleaved_cpu_ms([model, fast], (68, 100), threads=1, rounds=3)
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from torch import nn
 
 from learn import metrics as M
 from learn.models import prepare_for_inference
+from tactile.errors import ConfigError
 
 CHECK_SEED = 1234  # seed of the random images used to verify the bf16 path
 
@@ -94,6 +98,31 @@ def cpu_ms_per_image(model: nn.Module, input_size: tuple[int, int], threads: int
         return 1e3 * M.time_per_image(model, input_size, "cpu", n_warmup=20, n_runs=n_runs)
     finally:
         torch.set_num_threads(before)
+
+
+def interleaved_cpu_ms(nets: list[nn.Module | None], input_size: tuple[int, int],
+                       threads: int = 1, n_runs: int = 100, rounds: int = 3,
+                       n_warmup: int = 10) -> list[float | None]:  # fmt: skip
+    """CPU ms per image at batch 1 of each network (None for None): the least, over ``rounds``
+    rounds, of the median of ``n_runs`` runs after ``n_warmup`` warm-up runs, the networks taking
+    turns within each round. ``threads`` torch threads (restored afterwards); ``input_size``:
+    (H, W) px. Raises ``ConfigError`` for fewer than one round, run or thread."""
+    if rounds < 1 or n_runs < 1 or threads < 1 or n_warmup < 0:
+        raise ConfigError(f"timing needs rounds >= 1, runs >= 1, threads >= 1 and warm-up >= 0 "
+                          f"(got rounds={rounds}, runs={n_runs}, threads={threads}, "
+                          f"warm-up={n_warmup}); fix the timing options")  # fmt: skip
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    best: list[float | None] = [None if n is None else float("inf") for n in nets]
+    try:
+        for _ in range(rounds):
+            for i, net in enumerate(nets):
+                if net is not None:
+                    s = M.time_per_image(net, input_size, "cpu", n_warmup=n_warmup, n_runs=n_runs)
+                    best[i] = min(best[i], 1e3 * s)
+    finally:
+        torch.set_num_threads(before)
+    return best
 
 
 def gpu_ms_per_image(model: nn.Module, input_size: tuple[int, int]) -> float | None:
