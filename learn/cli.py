@@ -278,7 +278,8 @@ def evaluate_command(
     from learn.checkpoint import load_checkpoint, versions
     from learn.classical import load_npz
     from learn.eval_report import report_json, save_error_sheets, write_report
-    from learn.evaluate import check_timing, evaluate_checkpoint, evaluate_ensemble, tta_views
+    from learn.evaluate import evaluate_checkpoint, evaluate_ensemble, tta_views
+    from learn.fastpath import check_timing
     from learn.train import run_from_dict
 
     try:

@@ -22,7 +22,7 @@ from learn import metrics as M
 from learn.compiled import CompileUnavailable, compile_at, compiled_agreement
 from learn.device import device_of
 from learn.experiments import paper
-from learn.fastpath import fast_inference, gpu_ms_per_image, interleaved_cpu_ms
+from learn.fastpath import check_timing, fast_inference, gpu_ms_per_image, interleaved_cpu_ms
 from learn.inputs import unpressed_as_background
 from learn.models import prepare_for_inference
 from learn.numerics import flushing
@@ -207,15 +207,6 @@ def evaluate_ensemble(ckpt_paths: list[str | Path], data_path: str | Path, *,
     return _evaluate_members(load_members(ckpt_paths), data_path, hand_classes, threads,
                              time_runs, tta, compiled=compiled,
                              time_rounds=time_rounds)  # fmt: skip
-
-
-def check_timing(time_runs: int, time_rounds: int, threads: int) -> None:
-    """A ``ConfigError`` naming the option unless runs, rounds and threads are each >= 1."""
-    for name, value in (("time runs", time_runs), ("time rounds", time_rounds),
-                        ("threads", threads)):  # fmt: skip
-        if not isinstance(value, int) or value < 1:
-            raise ConfigError(f"{name} must be a whole number >= 1, got {value!r}; fix: pass "
-                              f"--{name.replace(' ', '-')} 1 or more")  # fmt: skip
 
 
 def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[str, ...] | None,

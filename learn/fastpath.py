@@ -100,6 +100,15 @@ def cpu_ms_per_image(model: nn.Module, input_size: tuple[int, int], threads: int
         torch.set_num_threads(before)
 
 
+def check_timing(time_runs: int, time_rounds: int, threads: int) -> None:
+    """A ``ConfigError`` naming the option unless runs, rounds and threads are each >= 1."""
+    for name, value in (("time runs", time_runs), ("time rounds", time_rounds),
+                        ("threads", threads)):  # fmt: skip
+        if not isinstance(value, int) or value < 1:
+            raise ConfigError(f"{name} must be a whole number >= 1, got {value!r}; fix the "
+                              f"timing options: pass --{name.replace(' ', '-')} 1 or more")
+
+
 def interleaved_cpu_ms(nets: list[nn.Module | None], input_size: tuple[int, int],
                        threads: int = 1, n_runs: int = 100, rounds: int = 3,
                        n_warmup: int = 10) -> list[float | None]:  # fmt: skip
@@ -107,10 +116,9 @@ def interleaved_cpu_ms(nets: list[nn.Module | None], input_size: tuple[int, int]
     rounds, of the median of ``n_runs`` runs after ``n_warmup`` warm-up runs, the networks taking
     turns within each round. ``threads`` torch threads (restored afterwards); ``input_size``:
     (H, W) px. Raises ``ConfigError`` for fewer than one round, run or thread."""
-    if rounds < 1 or n_runs < 1 or threads < 1 or n_warmup < 0:
-        raise ConfigError(f"timing needs rounds >= 1, runs >= 1, threads >= 1 and warm-up >= 0 "
-                          f"(got rounds={rounds}, runs={n_runs}, threads={threads}, "
-                          f"warm-up={n_warmup}); fix the timing options")  # fmt: skip
+    check_timing(n_runs, rounds, threads)
+    if n_warmup < 0:
+        raise ConfigError(f"warm-up runs must be >= 0, got {n_warmup}; fix the timing options")
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
     best: list[float | None] = [None if n is None else float("inf") for n in nets]
