@@ -217,31 +217,41 @@ def train_checked(arch: str, data, out: Path, *, config_path: Path | None = None
 
 
 def ms_per_image(model, images: np.ndarray, threads: int = 1, n_runs: int = 100,
-                 n_warmup: int = 20) -> float:  # fmt: skip
-    """Median CPU ms per image of ``model.predict`` at batch 1 (image k of ``images`` (S, h, w)
-    at run k, cycling) after ``n_warmup`` runs, with ``threads`` torch threads."""
+                 rounds: int = 3, n_warmup: int = 10) -> float:  # fmt: skip
+    """CPU ms per image of ``model.predict`` at batch 1 (image k of ``images`` (S, h, w) at run
+    k of a round, cycling) with ``threads`` torch threads: the least, over ``rounds`` rounds, of
+    the median of ``n_runs`` runs after ``n_warmup`` warm-up runs — as networks are timed
+    (`learn.fastpath.interleaved_cpu_ms`; a classical model has one path, so its rounds follow
+    each other). Raises ``ConfigError`` for fewer than one round, run or thread."""
     import torch
 
+    from learn.fastpath import check_timing
+
+    check_timing(n_runs, rounds, threads)
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
-    times = []
+    best = float("inf")
     try:
-        for k in range(n_warmup + n_runs):
-            one = images[k % len(images)][None]
-            start = time.perf_counter()
-            model.predict(one)
-            times.append(time.perf_counter() - start)
+        for _ in range(rounds):
+            times = []
+            for k in range(n_warmup + n_runs):
+                one = images[k % len(images)][None]
+                start = time.perf_counter()
+                model.predict(one)
+                times.append(time.perf_counter() - start)
+            best = min(best, float(np.median(times[n_warmup:])))
     finally:
         torch.set_num_threads(before)
-    return 1e3 * float(np.median(times[n_warmup:]))
+    return 1e3 * best
 
 
-def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
-                       threads: int = 1, time_runs: int = 100) -> dict:  # fmt: skip
+def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None, threads: int = 1,
+                       time_runs: int = 100, time_rounds: int = 3) -> dict:  # fmt: skip
     """Test-split scores and CPU ms/image of a classical model file; a row of
     ``learn.eval_report.write_report`` (the same keys as ``evaluate_checkpoint``'s; on a
     handskin dataset, with accuracy by contact size and contactor, and the errors ranked by
-    the SVM's margin, `learn.breakdown.svm_margin`)."""
+    the SVM's margin, `learn.breakdown.svm_margin`). Timed by :func:`ms_per_image` over
+    ``time_rounds`` rounds of ``time_runs`` runs."""
     from learn.breakdown import classifier_breakdown, svm_margin
     from learn.evaluate import metrics_from_cm, shared_with_training
     from learn.folder import is_dataset
@@ -261,12 +271,13 @@ def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
              if is_dataset(data) else {})  # fmt: skip
     cm = confusion(y, pred, len(names))
     scores = metrics_from_cm(cm)
-    ms = ms_per_image(model, x, threads, time_runs)
+    ms = ms_per_image(model, x, threads, time_runs, time_rounds)
     return {"checkpoint": str(path), "arch": meta["kind"], "task": "classify", "epoch": None,
             "class_names": list(meta["class_names"]), "n_test": len(y), "cm": cm.tolist(),
             "metrics": scores, "fast_metrics": scores, "bf16": False,
             "ms_per_image": {"fast": ms, "gpu": None}, "timing": TIMING[meta["kind"]],
-            "threads": threads, "seed": meta["seed"], "config": meta["config"],
+            "threads": threads, "time_runs": time_runs, "time_rounds": time_rounds,
+            "seed": meta["seed"], "config": meta["config"],
             "input_size": meta["input_size"], "train_versions": meta["versions"],
             "train_data": meta.get("data"), "test_data": str(data),
             "shared_with_training": shared_with_training(meta.get("data"), data),

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from learn import metrics as M
+from learn.classical import CLASSICAL
 from learn.evaluate import ARCH_LABEL, PAPER_TABLE3, PAPER_TABLE8, SEG_KEYS
 from learn.leakage import leakage_note
 from learn.row_labels import INT8_SUFFIX, TTA_SUFFIX, data_name, row_labels, trained_precision
@@ -415,9 +416,12 @@ def _timing_rule(rows: list[dict]) -> str:
         return "median of 100 runs after 20 warm-up runs"
     runs = " or ".join(f"{n}" for n in sorted({n for n, _ in specs}))
     rounds = " or ".join(f"{k}" for k in sorted({k for _, k in specs}))
+    one_path = any(r.get("arch") in CLASSICAL and r.get("time_rounds") for r in rows)
     return (f"each inference path's median of {runs} runs after 10 warm-up runs, the least over "
             f"{rounds} rounds in which a network's paths (eval mode, prepared, fast, compiled) "
-            f"take turns, so that a slow spell of the machine weighs on all of them alike")
+            f"take turns, so that a slow spell of the machine weighs on all of them alike"
+            + ("; a classical model (BoVW, VGG16 + SVM) has one path, timed in rounds that "
+               "follow each other" if one_path else ""))
 
 
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:

@@ -183,7 +183,8 @@ def evaluate_checkpoint(ckpt_path: str | Path, data_path: str | Path, *,
         from learn.classical import evaluate_classical
 
         return evaluate_classical(ckpt_path, data_path, hand_classes=hand_classes,
-                                  threads=threads, time_runs=time_runs)  # fmt: skip
+                                  threads=threads, time_runs=time_runs,
+                                  time_rounds=time_rounds)  # fmt: skip
     from learn.int8_file import is_int8
 
     ckpt = load_checkpoint(ckpt_path)

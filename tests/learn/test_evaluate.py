@@ -223,6 +223,7 @@ def test_vgg_svm_train_save_load_evaluate(vgg16_checkpoint, checkpoints, tiny_da
     acc = 100 * float((fresh.predict(x) == y).mean())
     assert f"| VGG16 + SVM | {acc:.2f} | {row['ms_per_image']['fast']:.2f} | unknown |" in text
     assert "| HandsNet | " in text and "| BoVW | not run |" in text
+    assert row["time_rounds"] == 3 and "has one path, timed in rounds that follow" in text
     assert json.loads((out / "test_metrics.json").read_text())["seed"] == 1
     # errors ranked by the SVM's own margin |score|, and the tables by contact size and contactor;
     # on a copy of the data whose hands are recorded as objects, the better the SVM, the more

@@ -73,3 +73,32 @@ def test_evaluate_rows_and_report_say_how_they_were_timed(checkpoints, tiny_data
     assert _timing_rule([old]) == "median of 100 runs after 20 warm-up runs"  # earlier reports
     with pytest.raises(ConfigError, match="time rounds must be"):
         evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_rounds=0)
+
+
+class SleepyPredictor:
+    """A classical model stand-in for timing only: ``predict`` sleeps ``delays_s[k]`` in round
+    ``k`` (``calls_per_round`` calls) and checks it gets one image at a time."""
+
+    def __init__(self, delays_s: list[float], calls_per_round: int):
+        self.delays_s, self.per_round, self.calls = delays_s, calls_per_round, 0
+
+    def predict(self, images):
+        assert images.shape[0] == 1
+        time.sleep(self.delays_s[min(self.calls // self.per_round, len(self.delays_s) - 1)])
+        self.calls += 1
+        return images[:, 0, 0]
+
+
+def test_classical_models_keep_the_least_round_median():
+    import numpy as np
+
+    from learn.classical import ms_per_image
+
+    warm, runs = 2, 5
+    model = SleepyPredictor([0.009, 0.003, 0.006], warm + runs)  # ms: 9, 3, 6
+    ms = ms_per_image(model, np.zeros((4, 3, 3)), threads=1, n_runs=runs, rounds=3,
+                      n_warmup=warm)  # fmt: skip
+    assert model.calls == 3 * (warm + runs)
+    assert 3.0 <= ms < 4.5  # round 2's median, not the median over all rounds (6 ms)
+    with pytest.raises(ConfigError, match="time rounds must be"):
+        ms_per_image(model, np.zeros((4, 3, 3)), rounds=0)
