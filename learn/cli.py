@@ -277,7 +277,8 @@ def evaluate_command(
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
     from learn.checkpoint import load_checkpoint, versions
     from learn.classical import load_npz
-    from learn.eval_report import report_json, save_error_sheets, write_report
+    from learn.error_sheets import save_error_sheets
+    from learn.eval_report import report_json, write_report
     from learn.evaluate import evaluate_checkpoint, evaluate_ensemble, tta_views
     from learn.fastpath import check_timing
     from learn.train import run_from_dict

@@ -20,7 +20,8 @@ from learn.classical import (
     train_classical,
 )
 from learn.config import VggSvmConfig
-from learn.eval_report import confusion_markdown, save_error_sheets, write_report
+from learn.error_sheets import save_error_sheets
+from learn.eval_report import confusion_markdown, write_report
 from learn.evaluate import (
     evaluate_checkpoint,
     evaluate_tensors,
