@@ -4,66 +4,97 @@ non-hand classifier or a hand-part segmenter fails.
 A touch that presses a handful of taxels carries little shape; the paper reports one accuracy
 over all images. ``handskin evaluate`` adds, for a handskin dataset, the accuracy of each true
 class within bins of the number of active taxels (pressure above the dataset's active
-threshold), and the accuracy on each kind of contactor (``kind: type`` from the dataset's
-``contactor`` JSON, e.g. ``object: rake``), so a user sees which contacts cost the accuracy;
+threshold) and within bins of the press force (the dataset's ``force_n``, newtons), and the
+accuracy on each kind of contactor (``kind: type`` from the dataset's ``contactor`` JSON, e.g.
+``object: rake``), so a user sees which contacts cost the accuracy;
 and for the hand samples, the accuracy by the hand parts that press (a palm alone leaves one
 round print) and by action. For a segmenter it adds pixel accuracy and mIoU of each group of
-test images: by contactor (right or left hand), by the dataset's ``action`` and by how many
-hand parts touch (from the label image): finger identity is easy to see on a whole-hand print
-and not on three fingertips.
-Finally it lists the samples a model gets most wrong: a classifier's errors, most confident
-first, and a segmenter's test images by their own mIoU, lowest first, with the predicted label
-maps of the worst few packed into the JSON row (`pack_labels`) so the report's picture of them
-can be drawn again from the JSON alone.
+test images: by contactor (right or left hand), by the dataset's ``action``, by press force and
+by how many hand parts touch (from the label image): finger identity is easy to see on a
+whole-hand print and not on three fingertips.
+Finally it lists a classifier's errors, most confident first (a segmenter's worst images are
+`learn.worst`'s).
 """
 
 from __future__ import annotations
 
-import base64
 import json
-import zlib
 from collections.abc import Sequence
 from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
 
-from learn.significance import batched_mean_iou, per_image_confusion
-
-#: A segmenter's worst test images kept in its report row, and how many of them (the first)
-#: carry their predicted label maps for the report's picture.
-N_WORST_KEPT, N_WORST_MAPS = 50, 9
-
 #: Lower edges of the active-taxel bins (count); the last bin is open.
 EDGES: tuple[int, ...] = (0, 10, 20, 40, 80)
+
+#: Lower edges of the press-force bins (newtons); the last bin is open. A hand pressing under
+#: 10 N leaves a print of a few taxels.
+FORCE_EDGES_N: tuple[float, ...] = (0, 5, 10, 20, 40)
+
+
+def accuracy_by_bins(
+    pred: np.ndarray, truth: np.ndarray, values: np.ndarray,
+    class_names: Sequence[str], edges: Sequence[float],
+) -> list[dict[str, object]]:  # fmt: skip
+    """Per bin ``[lo, hi)`` of ``values``: samples and accuracy (fraction) of each true class.
+
+    pred, truth : (S,) int class ids; values : (S,) a number per sample (active taxels, press
+    force in N); edges : increasing lower bin edges, the last bin open. A sample below the first
+    edge (or NaN) is in no bin. Returns one dict per bin: ``{"lo", "hi" (None: open), "n",
+    "per_class": {name: {"n", "accuracy" (None when the bin has no sample of the class)}}}``.
+    """
+    pred, truth, values = (np.asarray(a).ravel() for a in (pred, truth, values))
+    if not len(pred) == len(truth) == len(values):
+        raise ValueError(f"pred, truth and values differ in length: "
+                         f"{len(pred)}, {len(truth)}, {len(values)}")  # fmt: skip
+    rows = []
+    for lo, hi in pairwise([*edges, None]):
+        in_bin = (values >= lo) & (True if hi is None else values < hi)
+        per_class = {}
+        for c, name in enumerate(class_names):
+            m = in_bin & (truth == c)
+            acc = float(np.mean(pred[m] == c)) if m.any() else None
+            per_class[name] = {"n": int(m.sum()), "accuracy": acc}
+        rows.append({"lo": plain_scalar(lo), "hi": None if hi is None else plain_scalar(hi),
+                     "n": int(in_bin.sum()), "per_class": per_class})  # fmt: skip
+    return rows
 
 
 def accuracy_by_active_taxels(
     pred: np.ndarray, truth: np.ndarray, n_active: np.ndarray,
     class_names: Sequence[str], edges: Sequence[int] = EDGES,
 ) -> list[dict[str, object]]:  # fmt: skip
-    """Per bin of active-taxel count: samples and accuracy (fraction) of each true class.
+    """:func:`accuracy_by_bins` of the active-taxel counts ``n_active`` (S,) int."""
+    return accuracy_by_bins(pred, truth, n_active, class_names, edges)
 
-    pred, truth : (S,) int class ids; n_active : (S,) int active taxels per sample.
-    Returns one dict per bin: ``{"lo", "hi" (None: open), "n", "per_class": {name: {"n",
-    "accuracy" (None when the bin has no sample of the class)}}}``.
-    """
-    pred, truth, n_active = (np.asarray(a).ravel() for a in (pred, truth, n_active))
-    if not len(pred) == len(truth) == len(n_active):
-        raise ValueError(f"pred, truth and n_active differ in length: "
-                         f"{len(pred)}, {len(truth)}, {len(n_active)}")  # fmt: skip
-    rows = []
-    bounds = [*edges, None]
-    for lo, hi in pairwise(bounds):
-        in_bin = (n_active >= lo) & (True if hi is None else n_active < hi)
-        per_class = {}
-        for c, name in enumerate(class_names):
-            m = in_bin & (truth == c)
-            acc = float(np.mean(pred[m] == c)) if m.any() else None
-            per_class[name] = {"n": int(m.sum()), "accuracy": acc}
-        rows.append({"lo": int(lo), "hi": None if hi is None else int(hi),
-                     "n": int(in_bin.sum()), "per_class": per_class})  # fmt: skip
-    return rows
+
+def press_forces_n(data_path: str | Path, indices: np.ndarray) -> np.ndarray | None:
+    """The press force (N, the dataset's ``force_n``: total normal force at the sampled frame)
+    of samples ``indices`` (S,) of a handskin dataset, (S,) float64; None without the field
+    (ingested recordings)."""
+    from tactile.dataset.reader import DatasetReader
+
+    with DatasetReader(data_path) as reader:
+        if "force_n" not in reader.fields:
+            return None
+        order = np.argsort(indices)
+        raw = reader["force_n"][np.asarray(indices)[order]]
+    out = np.empty(len(indices))
+    out[order] = raw
+    return out
+
+
+def bin_labels(values: np.ndarray, edges: Sequence[float],
+               unit: str) -> tuple[list[str], list[str]]:  # fmt: skip
+    """(label of each of ``values`` (S,), the labels in bin order): ``"5–10 N"`` for ``[5, 10)``,
+    ``"40+ N"`` for the open last bin, ``"unknown"`` below the first edge or NaN."""
+    names = [f"{lo:g}+ {unit}" if hi is None else f"{lo:g}–{hi:g} {unit}"
+             for lo, hi in pairwise([*edges, None])]  # fmt: skip
+    k = np.searchsorted(np.asarray(edges, float), np.asarray(values, float), side="right") - 1
+    labels = [names[j] if j >= 0 and np.isfinite(v) else "unknown"
+              for j, v in zip(k.tolist(), np.asarray(values, float).tolist(), strict=True)]
+    return labels, names
 
 
 def active_taxel_counts(data_path: str | Path, indices: np.ndarray) -> np.ndarray:
@@ -81,13 +112,18 @@ def active_taxel_counts(data_path: str | Path, indices: np.ndarray) -> np.ndarra
     return out
 
 
-def breakdown_markdown(rows: list[dict]) -> list[str]:
-    """A markdown table of :func:`accuracy_by_active_taxels` (accuracy in %)."""
+def breakdown_markdown(rows: list[dict], title: str = "active taxels",
+                       unit: str | None = None) -> list[str]:  # fmt: skip
+    """A markdown table of :func:`accuracy_by_bins` (accuracy in %), first column ``title``:
+    count bins ``10–19`` (``unit`` None), or half-open bins of a measure ``5–10 N``."""
     names = list(rows[0]["per_class"]) if rows else []
-    head = "| active taxels | " + " | ".join(f"{n}: samples | {n}: accuracy %" for n in names)
+    head = f"| {title} | " + " | ".join(f"{n}: samples | {n}: accuracy %" for n in names)
     lines = [head + " |", "|---|" + "---|---|" * len(names)]
     for r in rows:
-        span = f"{r['lo']}+" if r["hi"] is None else f"{r['lo']}–{r['hi'] - 1}"
+        if unit is None:
+            span = f"{r['lo']}+" if r["hi"] is None else f"{r['lo']}–{r['hi'] - 1}"
+        else:
+            span = f"{r['lo']:g}+ {unit}" if r["hi"] is None else f"{r['lo']:g}–{r['hi']:g} {unit}"
         cells = []
         for n in names:
             c = r["per_class"][n]
@@ -205,10 +241,13 @@ def group_markdown(rows: list[dict], title: str = "contactor") -> list[str]:
 
 
 def segmentation_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[str],
-                          num_classes: int, by_name: bool = False) -> list[dict[str, object]]:
+                          num_classes: int, by_name: bool = False,
+                          order: Sequence[str] | None = None,
+                          ) -> list[dict[str, object]]:  # fmt: skip
     """Per group: samples, pixel accuracy and mIoU (fractions) of the group's pooled confusion
     matrix (Long et al.; classes absent from the group's ground truth skipped), lowest mIoU
-    first (``by_name``: in the groups' sorted order).
+    first (``by_name``: in the groups' sorted order; ``order``: in that order, other groups
+    last).
 
     pred, truth : (S, h, w) int class ids; groups : (S,) str group of each image.
     """
@@ -226,6 +265,9 @@ def segmentation_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[
         cm = M.confusion_matrix(truth[m], pred[m], num_classes)
         rows.append({"group": str(g), "n": len(m), "pixel_accuracy": M.accuracy(cm),
                      "mean_iou": M.mean_iou(cm)})  # fmt: skip
+    if order is not None:
+        rank = {g: i for i, g in enumerate(order)}
+        return sorted(rows, key=lambda r: (rank.get(r["group"], len(rank)), r["group"]))
     return rows if by_name else sorted(rows, key=lambda r: (r["mean_iou"], r["group"]))
 
 
@@ -280,7 +322,7 @@ def misclassified(
     about = about or {}
     return [{"index": int(indices[k]), "true": class_names[truth[k]],
              "predicted": class_names[pred[k]], confidence_name: float(confidence[k]),
-             **{name: _plain(values[k]) for name, values in about.items()}}
+             **{name: plain_scalar(values[k]) for name, values in about.items()}}
             for k in wrong]  # fmt: skip
 
 
@@ -289,7 +331,8 @@ def classifier_breakdown(
     confidence: np.ndarray, class_names: Sequence[str], confidence_name: str = "probability",
 ) -> dict[str, object]:  # fmt: skip
     """A classifier's report fields on a handskin dataset's test samples ``indices`` (S,):
-    ``by_active_taxels``, ``by_contactor``, the hand samples' accuracy by the hand parts that
+    ``by_active_taxels``, ``by_force`` (press force bins `FORCE_EDGES_N`, N; None without the
+    dataset's ``force_n``), ``by_contactor``, the hand samples' accuracy by the hand parts that
     press (``hands_by_parts``, in `HAND_PART_GROUPS` order) and by action (``hands_by_action``,
     least accurate first), and ``errors`` (most confident first; see `misclassified` for
     ``confidence`` (S,) and ``confidence_name``)."""
@@ -298,8 +341,11 @@ def classifier_breakdown(
     actions = action_names(data_path, indices)
     parts = hand_parts_groups(data_path, indices)
     hand_actions = [a if p is not None else None for a, p in zip(actions, parts, strict=True)]
+    forces = press_forces_n(data_path, indices)
     return {
         "by_active_taxels": accuracy_by_active_taxels(pred, truth, n_active, class_names),
+        "by_force": (None if forces is None
+                     else accuracy_by_bins(pred, truth, forces, class_names, FORCE_EDGES_N)),
         "by_contactor": accuracy_by_group(pred, truth, contactors),
         "hands_by_parts": hands_by_group(pred, truth, parts, HAND_PART_GROUPS),
         "hands_by_action": hands_by_group(pred, truth, hand_actions),
@@ -307,6 +353,26 @@ def classifier_breakdown(
                                 {"contactor": contactors, "active taxels": n_active.tolist(),
                                  "action": actions, "hand parts": parts},
                                 confidence_name)}  # fmt: skip
+
+
+def segmenter_breakdown(
+    data_path: str | Path, indices: np.ndarray, pred: np.ndarray, truth: np.ndarray,
+    num_classes: int, actions: Sequence[str], parts: Sequence[str],
+) -> dict[str, list[dict[str, object]]]:  # fmt: skip
+    """A segmenter's scores (`segmentation_by_group`) on a handskin dataset's test images
+    ``indices`` (S,) — pred, truth (S, h, w) class ids — by contactor, by action (``actions``
+    (S,), `action_names`), by hand parts touching (``parts`` (S,), counts as text) and, when the
+    dataset has ``force_n``, by press force (bins `FORCE_EDGES_N`, N, in order)."""
+    out = {"contactor": segmentation_by_group(pred, truth, contactor_types(data_path, indices),
+                                              num_classes),
+           "action": segmentation_by_group(pred, truth, actions, num_classes),
+           "hand parts touching": segmentation_by_group(pred, truth, parts, num_classes,
+                                                        by_name=True)}  # fmt: skip
+    forces = press_forces_n(data_path, indices)
+    if forces is not None:
+        labels, order = bin_labels(forces, FORCE_EDGES_N, "N")
+        out["press force"] = segmentation_by_group(pred, truth, labels, num_classes, order=order)
+    return out
 
 
 def svm_margin(scores: np.ndarray) -> np.ndarray:
@@ -319,53 +385,6 @@ def svm_margin(scores: np.ndarray) -> np.ndarray:
     return top2[:, 1] - top2[:, 0]
 
 
-def worst_segmentations(
-    pred: np.ndarray, truth: np.ndarray, indices: Sequence[int], num_classes: int,
-    about: dict[str, Sequence] | None = None, cms: np.ndarray | None = None,
-) -> tuple[list[dict[str, object]], np.ndarray]:  # fmt: skip
-    """Every test image scored on its own, lowest mIoU first (ties by pixel accuracy, then
-    test order): where a segmenter fails. pred, truth : (S, h, w) int class ids; indices :
-    (S,) dataset sample indices; ``about`` : named (S,) sequences copied into each record;
-    ``cms`` : the images' (S, C, C) confusion matrices when the caller has them already
-    (`learn.significance.per_image_confusion`).
-
-    Each image's mIoU and pixel accuracy follow Long et al. on its own confusion matrix:
-    classes absent from its ground truth are skipped in the mean, so a finger painted where
-    none touches costs the IoU of the class it covers. Returns the records
-    ``{"index", "mean_iou", "pixel_accuracy", **about}`` (scores as fractions 0..1) and the
-    (S,) order of test positions they follow.
-    """
-    pred, truth = np.asarray(pred), np.asarray(truth)
-    if pred.shape != truth.shape or pred.ndim != 3:
-        raise ValueError(f"pred {pred.shape} and truth {truth.shape} must be equal (S, h, w)")
-    s = len(truth)
-    cm = per_image_confusion(pred, truth, num_classes) if cms is None else cms
-    miou = batched_mean_iou(cm)
-    acc = np.diagonal(cm, axis1=1, axis2=2).sum(1) / cm.sum((1, 2))
-    order = np.lexsort((np.arange(s), acc, miou))
-    about = about or {}
-    records = [{"index": int(indices[k]), "mean_iou": float(miou[k]),
-                "pixel_accuracy": float(acc[k]),
-                **{name: _plain(values[k]) for name, values in about.items()}}
-               for k in order]  # fmt: skip
-    return records, order
-
-
-def pack_labels(labels: np.ndarray) -> dict[str, object]:
-    """(N, h, w) class ids (0..255) as a JSON-ready dict: shape and zlib-compressed base64
-    bytes (a print's label map is mostly background, so a few kB). `unpack_labels` inverts."""
-    labels = np.asarray(labels)
-    if labels.size and (labels.min() < 0 or labels.max() > 255):
-        raise ValueError("pack_labels: class ids must lie in 0..255")
-    raw = zlib.compress(np.ascontiguousarray(labels, dtype=np.uint8).tobytes(), 9)
-    return {"shape": list(labels.shape), "zlib_base64": base64.b64encode(raw).decode("ascii")}
-
-
-def unpack_labels(packed: dict[str, object]) -> np.ndarray:
-    """The uint8 array of shape ``packed["shape"]`` that `pack_labels` stored."""
-    raw = zlib.decompress(base64.b64decode(str(packed["zlib_base64"])))
-    return np.frombuffer(raw, np.uint8).reshape([int(n) for n in packed["shape"]]).copy()
-
-
-def _plain(v: object) -> object:
+def plain_scalar(v: object) -> object:
+    """A numpy scalar as the Python number it holds (for JSON); anything else as it is."""
     return v.item() if isinstance(v, np.generic) else v

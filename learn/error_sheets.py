@@ -67,8 +67,8 @@ def _confidence(error: dict) -> str:
 
 def _segmenter_sheet(r: dict, label: str, data: str | Path, path: Path) -> None:
     """Pairs of tiles: truth, then prediction, of the images whose maps the row carries."""
-    from learn.breakdown import unpack_labels
     from learn.inputs import input_canvas, net_input, net_labels
+    from learn.worst import unpack_labels
     from tactile.dataset.reader import DatasetReader
     from tactile.sheet import save_contact_sheet
 

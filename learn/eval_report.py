@@ -274,6 +274,9 @@ def _by_size(r: dict) -> list[str]:
         return []
     out = ["Accuracy by contact size (active taxels: pressure above the dataset's active "
            "threshold):", "", *breakdown_markdown(r["by_active_taxels"]), ""]
+    if r.get("by_force"):
+        out += ["Accuracy by press force (the dataset's `force_n`: total normal force at the "
+                "sampled frame):", "", *breakdown_markdown(r["by_force"], "press force", "N"), ""]
     if r.get("by_contactor"):
         out += ["Accuracy by contactor (the dataset's `contactor` kind and type), least accurate "
                 "first:", "", *group_markdown(r["by_contactor"]), ""]

@@ -216,20 +216,16 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     """The report row of one network or the mean of several (`learn.ensemble.Member` list);
     ``int8``: of one HandsNet's int8 copy; ``compiled``: also timed compiled."""
     from learn.breakdown import (
-        N_WORST_KEPT,
-        N_WORST_MAPS,
         action_names,
         classifier_breakdown,
-        contactor_types,
-        pack_labels,
         parts_in_contact,
-        segmentation_by_group,
-        worst_segmentations,
+        segmenter_breakdown,
     )
     from learn.cluster_bootstrap import grouped_mean_iou_interval, sample_groups
     from learn.ensemble import MeanSoftmax
     from learn.folder import group_ids, is_dataset
     from learn.significance import mean_iou_interval, per_image_confusion
+    from learn.worst import N_WORST_KEPT, N_WORST_MAPS, pack_labels, worst_segmentations
 
     first, run = members[0], members[0].run
     views = [tta_views(m.run, m.path) for m in members] if tta else None
@@ -254,7 +250,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     seg_groups = worst = miou_interval = groups = None
     if on_dataset:  # each test sample's subject / object instance, for intervals over them
         groups = sample_groups(*group_ids(split)[1:], n=len(test.y))
-    found = dict.fromkeys(("by_active_taxels", "by_contactor", "hands_by_parts",
+    found = dict.fromkeys(("by_active_taxels", "by_force", "by_contactor", "hands_by_parts",
                            "hands_by_action", "errors"))
     if classify_data:  # accuracy by contact size and by contactor, most confident errors
         names = list(ckpt.get("class_names") or [str(c) for c in range(n_cls)])
@@ -264,11 +260,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
         pred, y = ref.predictions.numpy(), test.y.numpy()
         parts = [str(k) for k in parts_in_contact(y, n_cls)]
         actions = action_names(data_path, split.indices)
-        seg_groups = {
-            "contactor": segmentation_by_group(pred, y, contactor_types(data_path, split.indices),
-                                               n_cls),
-            "action": segmentation_by_group(pred, y, actions, n_cls),
-            "hand parts touching": segmentation_by_group(pred, y, parts, n_cls, by_name=True)}
+        seg_groups = segmenter_breakdown(data_path, split.indices, pred, y, n_cls, actions, parts)
         cms = per_image_confusion(pred, y, n_cls)
         worst, order = worst_segmentations(pred, y, split.indices, n_cls,
                                            {"action": actions, "hand parts touching": parts},

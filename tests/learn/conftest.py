@@ -58,6 +58,7 @@ def make_sample(i: int, tmap: TactileMap, flat_mm: np.ndarray) -> dict:
         "label_image": tmap.label_image(p, labels) if hand else np.zeros(tmap.shape, np.uint8),
         "is_hand": np.uint8(hand), "subject_id": np.int32(i // 4 if hand else -1),
         "instance_id": np.int32(-1 if hand else (i - N_HAND) // 4),
+        "force_n": np.float32(rng.uniform(1.0, 60.0)),  # drawn last: earlier draws unchanged
     }  # fmt: skip
 
 

@@ -7,20 +7,21 @@ import numpy as np
 import pytest
 
 from learn.breakdown import (
+    FORCE_EDGES_N,
     accuracy_by_active_taxels,
+    accuracy_by_bins,
     accuracy_by_group,
+    bin_labels,
     breakdown_markdown,
     group_markdown,
     hand_parts_group,
     hand_parts_groups,
     hands_by_group,
-    pack_labels,
     parts_in_contact,
     segmentation_by_group,
     segmentation_group_markdown,
-    unpack_labels,
-    worst_segmentations,
 )
+from learn.worst import pack_labels, unpack_labels, worst_segmentations
 
 
 def _reference_scores(pred: np.ndarray, truth: np.ndarray, k: int) -> tuple[float, float]:
@@ -55,6 +56,26 @@ def test_bins_and_per_class_accuracy_by_hand():
     assert empty[0]["per_class"]["non_hand"] == {"n": 0, "accuracy": None}
     table = "\n".join(breakdown_markdown(rows))
     assert "| 0–9 | 1 | 100.0 | 2 | 50.0 |" in table and "| 80+ | 1 | 100.0 | 1 | 100.0 |" in table
+
+
+def test_force_bins_by_hand_half_open_and_out_of_range():
+    """Press forces (N) binned [lo, hi): an edge value goes up, NaN and negatives in no bin."""
+    force = np.array([0.0, 4.99, 5.0, 12.0, 19.99, 20.0, 39.0, 40.0, 300.0, np.nan, -1.0])
+    truth = np.array([1, 1, 0, 1, 1, 0, 1, 1, 0, 1, 0])
+    pred = np.array([0, 1, 0, 0, 1, 0, 1, 1, 1, 1, 0])
+    rows = accuracy_by_bins(pred, truth, force, ["non_hand", "hand"], FORCE_EDGES_N)
+    assert [(r["lo"], r["hi"], r["n"]) for r in rows] == [
+        (0, 5, 2), (5, 10, 1), (10, 20, 2), (20, 40, 2), (40, None, 2)]
+    assert rows[0]["per_class"]["hand"] == {"n": 2, "accuracy": 0.5}
+    assert rows[2]["per_class"]["hand"] == {"n": 2, "accuracy": 0.5}
+    assert rows[4]["per_class"]["non_hand"] == {"n": 1, "accuracy": 0.0}
+    table = "\n".join(breakdown_markdown(rows, "press force", "N"))
+    assert table.startswith("| press force | non_hand: samples")
+    assert "| 0–5 N | 0 | – | 2 | 50.0 |" in table and "| 40+ N | 1 | 0.0 | 1 | 100.0 |" in table
+    labels, order = bin_labels(force, FORCE_EDGES_N, "N")
+    assert order == ["0–5 N", "5–10 N", "10–20 N", "20–40 N", "40+ N"]
+    assert labels == ["0–5 N", "0–5 N", "5–10 N", "10–20 N", "10–20 N", "20–40 N", "20–40 N",
+                      "40+ N", "40+ N", "unknown", "unknown"]  # fmt: skip
 
 
 def test_lengths_must_agree():
@@ -129,6 +150,9 @@ def test_segmentation_by_group_against_pixel_counts(seed):
         assert r["pixel_accuracy"] == pytest.approx(acc) and r["mean_iou"] == pytest.approx(miou)
     named = segmentation_by_group(pred, truth, groups, k, by_name=True)
     assert [r["group"] for r in named] == sorted(set(groups))
+    given = ["hand: right_hand", "action: grasp"]  # a group not named goes last
+    ordered = segmentation_by_group(pred, truth, groups, k, order=given)
+    assert [r["group"] for r in ordered] == [*given, "hand: left_hand"]
     text = "\n".join(segmentation_group_markdown(rows, "contactor"))
     r = rows[0]
     assert f"| {r['group']} | {r['n']} | {100 * r['pixel_accuracy']:.1f} |" in text

@@ -35,6 +35,7 @@ from learn.folder import TensorData
 from learn.models import create_model
 from learn.train import fit, load_data
 from learn.vgg_svm import VggSvmClassifier
+from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError
 
 
@@ -112,6 +113,18 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
         right = sum(b["per_class"][name]["n"] * (b["per_class"][name]["accuracy"] or 0)
                     for b in per_bin)  # fmt: skip
         assert n == sum(clf["cm"][c]) and round(right) == clf["cm"][c][c]
+    # so does the one by press force, from the dataset's force_n
+    with DatasetReader(tiny_dataset) as reader:
+        force = reader["force_n"][reader.splits["test"]]
+    for c, name in enumerate(clf["class_names"]):
+        assert sum(b["per_class"][name]["n"] for b in clf["by_force"]) == sum(clf["cm"][c])
+    assert [b["n"] for b in clf["by_force"]] == [
+        int(np.sum((force >= b["lo"]) & (force < (b["hi"] or np.inf)))) for b in clf["by_force"]]
+    assert "Accuracy by press force" in text and "| 40+ N |" in text
+    forces = seg["segmentation_by_group"]["press force"]
+    assert [g["group"] for g in forces] == [g for g in ("0–5 N", "5–10 N", "10–20 N", "20–40 N",
+                                            "40+ N") if g in {f["group"] for f in forces}]
+    assert sum(g["n"] for g in forces) == seg["n_test"]
     # so does the contactor breakdown (this dataset stores no contactor field: one "unknown")
     groups = clf["by_contactor"]
     assert [g["group"] for g in groups] == ["unknown"] and groups[0]["n"] == 16
@@ -131,7 +144,7 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     # the segmenter's groups: every test image in one group per grouping, and the hand-parts
     # groups re-add to the whole test split's pixel count
     by = seg["segmentation_by_group"]
-    assert set(by) == {"contactor", "action", "hand parts touching"}
+    assert set(by) == {"contactor", "action", "hand parts touching", "press force"}
     assert all(sum(r["n"] for r in rows) == seg["n_test"] for rows in by.values())
     assert [r["group"] for r in by["action"]] == ["unknown"]  # the tiny set stores no action
     assert by["action"][0]["mean_iou"] == pytest.approx(seg["metrics"]["mean_iou"])
@@ -349,9 +362,9 @@ def test_segmenter_worst_images_and_their_sheet(checkpoints, tiny_dataset, tmp_p
     import typer
     from typer.testing import CliRunner
 
-    from learn.breakdown import unpack_labels
     from learn.cli import register
     from learn.metrics import confusion_matrix, mean_iou
+    from learn.worst import unpack_labels
 
     ckpt = checkpoints["segnet"]
     row = evaluate_checkpoint(ckpt, tiny_dataset, time_runs=2)
