@@ -80,8 +80,10 @@ def main() -> None:
     print("\n".join(by_force))
     people.sort()
     acc, med = np.array([p[0] for p in people]), np.array([p[1] for p in people])
+    r = (f"r = {np.corrcoef(acc, med)[0, 1]:.2f}" if len(people) > 1 and acc.std() and med.std()
+         else "undefined (too few people, or all alike)")  # fmt: skip
     print(f"\nHeld-out people ({len(people)}): correlation of hand accuracy with median press "
-          f"force r = {np.corrcoef(acc, med)[0, 1]:.2f}")
+          f"force {r}")
     for lo, hi in ((0, 20), (20, 30), (30, np.inf)):
         group = [p for p in people if lo <= p[1] < hi]
         pooled = sum(p[0] * p[4] for p in group) / max(1, sum(p[4] for p in group))
