@@ -18,6 +18,7 @@ from learn.breakdown import (
     hand_parts_groups,
     hands_by_group,
     parts_in_contact,
+    press_forces_n,
     segmentation_by_group,
     segmentation_group_markdown,
 )
@@ -128,6 +129,16 @@ def test_hand_parts_groups_read_from_a_dataset(tmp_path, tiny_writer, drop):
     hand = "5 parts" if not drop else "unknown" if "taxel_label" in drop else None
     got = hand_parts_groups(folder, np.array([1, 2, 0, 3]))  # out of order on purpose
     assert got == [hand, None, hand, None]
+
+
+def test_press_forces_read_in_any_order_and_none_without_the_field(tmp_path, tiny_writer):
+    from tactile.dataset.reader import open_dataset
+
+    folder = tiny_writer(tmp_path / "d", [0, 1, 30, 31])
+    with open_dataset(folder) as reader:
+        stored = reader["force_n"][:]
+    np.testing.assert_array_equal(press_forces_n(folder, np.array([2, 0, 3])), stored[[2, 0, 3]])
+    assert press_forces_n(tiny_writer(tmp_path / "e", [0, 30], ("force_n",)), np.arange(2)) is None
 
 
 @pytest.mark.parametrize("seed", range(4))
