@@ -69,6 +69,16 @@ def accuracy_by_active_taxels(
     return accuracy_by_bins(pred, truth, n_active, class_names, edges)
 
 
+def rows_in_order(reader, field: str, indices: np.ndarray) -> np.ndarray:
+    """Field ``field`` of samples ``indices`` (S,) of an open `DatasetReader`, in the order of
+    ``indices`` (h5py reads a list of rows in increasing order only); (S, ...)."""
+    order = np.argsort(indices)
+    raw = reader[field][np.asarray(indices)[order]]
+    out = np.empty_like(raw)
+    out[order] = raw
+    return out
+
+
 def press_forces_n(data_path: str | Path, indices: np.ndarray) -> np.ndarray | None:
     """The press force (N, the dataset's ``force_n``: total normal force at the sampled frame)
     of samples ``indices`` (S,) of a handskin dataset, (S,) float64; None without the field
@@ -78,11 +88,7 @@ def press_forces_n(data_path: str | Path, indices: np.ndarray) -> np.ndarray | N
     with DatasetReader(data_path) as reader:
         if "force_n" not in reader.fields:
             return None
-        order = np.argsort(indices)
-        raw = reader["force_n"][np.asarray(indices)[order]]
-    out = np.empty(len(indices))
-    out[order] = raw
-    return out
+        return rows_in_order(reader, "force_n", indices).astype(np.float64)
 
 
 def bin_labels(values: np.ndarray, edges: Sequence[float],
@@ -104,12 +110,8 @@ def active_taxel_counts(data_path: str | Path, indices: np.ndarray) -> np.ndarra
     from tactile.dataset.reader import DatasetReader
 
     with DatasetReader(data_path) as reader:
-        order = np.argsort(indices)
-        p = reader.pressure_pa[np.asarray(indices)[order]]
-        counts = (p > active_threshold_pa(reader)).sum(axis=1)
-    out = np.empty(len(indices), np.int64)
-    out[order] = counts
-    return out
+        p = rows_in_order(reader, "pressure_pa", indices)
+        return (p > active_threshold_pa(reader)).sum(axis=1).astype(np.int64)
 
 
 def breakdown_markdown(rows: list[dict], title: str = "active taxels",
@@ -159,15 +161,14 @@ def contactor_types(data_path: str | Path, indices: np.ndarray) -> list[str]:
     with DatasetReader(data_path) as reader:
         if "contactor" not in reader.fields:
             return ["unknown"] * len(indices)
-        order = np.argsort(indices)
-        raw = reader["contactor"][np.asarray(indices)[order]]
-    out = [""] * len(indices)
-    for pos, text in zip(order, raw, strict=True):
+        raw = rows_in_order(reader, "contactor", indices)
+    out = []
+    for text in raw:
         try:
             c = json.loads(text.decode() if isinstance(text, bytes) else text)
-            out[pos] = f"{c['kind']}: {c.get('type', c.get('name'))}"
+            out.append(f"{c['kind']}: {c.get('type', c.get('name'))}")
         except (ValueError, KeyError, TypeError):
-            out[pos] = "unknown"
+            out.append("unknown")
     return out
 
 
@@ -287,12 +288,8 @@ def action_names(data_path: str | Path, indices: np.ndarray) -> list[str]:
         names = list(reader.attrs.get("actions", []))
         if "action" not in reader.fields or not names:
             return ["unknown"] * len(indices)
-        order = np.argsort(indices)
-        raw = reader["action"][np.asarray(indices)[order]]
-    out = [""] * len(indices)
-    for pos, a in zip(order, raw, strict=True):
-        out[pos] = "none" if a < 0 else names[a] if a < len(names) else "unknown"
-    return out
+        raw = rows_in_order(reader, "action", indices)
+    return ["none" if a < 0 else names[a] if a < len(names) else "unknown" for a in raw]
 
 
 def segmentation_group_markdown(rows: list[dict], title: str) -> list[str]:
