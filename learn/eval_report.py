@@ -42,9 +42,13 @@ def _fmt(v: float | None, scale: float = 1.0) -> str:
 def trained_on(r: dict) -> str:
     """The "trained on" cell of a report row: its training data, and a warning when test
     samples share subjects or object instances with it (``learn.leakage``)."""
-    leak = (r.get("shared_with_training") or {}).get("test_samples")
-    return data_name(r) + (f"; not held out: {leak} test samples share its subjects"
-                            if leak else "")  # fmt: skip
+    shared = r.get("shared_with_training") or {}
+    leak = shared.get("test_samples")
+    if not leak:
+        return data_name(r)
+    what = [name for name, key in (("subjects", "subjects"), ("object instances", "instances"))
+            if shared.get(key)] or ["subjects or object instances"]
+    return data_name(r) + f"; not held out: {leak} test samples share its {' or '.join(what)}"
 
 
 def _init_text(r: dict) -> str:
