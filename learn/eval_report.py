@@ -47,7 +47,7 @@ def trained_on(r: dict) -> str:
     if not leak:
         return data_name(r)
     what = [name for name, key in (("subjects", "subjects"), ("object instances", "instances"))
-            if shared.get(key)] or ["subjects or object instances"]
+            if shared.get(key)]
     return data_name(r) + f"; not held out: {leak} test samples share its {' or '.join(what)}"
 
 
