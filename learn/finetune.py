@@ -114,8 +114,11 @@ def param_groups(
 
 
 def make_optimizer(model: nn.Module, cfg: TrainConfig) -> torch.optim.Optimizer:
-    """SGD with momentum (or Adam) over :func:`param_groups` with ``cfg.lr_factors``."""
+    """SGD with momentum, Adam (L2 in the gradient) or AdamW (decay decoupled from the gradient,
+    Loshchilov & Hutter 2019) over :func:`param_groups` with ``cfg.lr_factors``."""
     groups = param_groups(model, cfg.lr, cfg.lr_factors)
+    if cfg.optimizer == "adamw":
+        return torch.optim.AdamW(groups, lr=cfg.lr, weight_decay=cfg.weight_decay)
     if cfg.optimizer == "adam":
         return torch.optim.Adam(groups, lr=cfg.lr, weight_decay=cfg.weight_decay)
     return torch.optim.SGD(groups, lr=cfg.lr, momentum=cfg.momentum, weight_decay=cfg.weight_decay)

@@ -60,13 +60,18 @@ def weighted_cross_entropy(
     target: torch.Tensor,
     weights: torch.Tensor | Sequence[float] | None = None,
     ignore_index: int = -100,
+    label_smoothing: float = 0.0,
 ) -> torch.Tensor:
     """Class-weighted cross-entropy: ``Σ w[y]·(−log softmax[y]) / Σ w[y]`` (scalar).
 
-    logits : ``(B, C)`` or ``(B, C, H, W)``; target : ``(B,)`` or ``(B, H, W)`` int64 class ids.
+    logits : ``(B, C)`` or ``(B, C, H, W)``; target : ``(B,)`` or ``(B, H, W)`` int64 class ids,
+    or ``(B, C)`` float class probabilities (mixup, `learn.augment.mixup`: then the weighted sum
+    is averaged over the batch, torch's rule for soft targets). ``label_smoothing`` ε trains
+    against ``(1 − ε)·target + ε / C`` (Szegedy et al., 2016).
     """
     w = None if weights is None else torch.as_tensor(weights, dtype=logits.dtype).to(logits.device)
-    return nn.functional.cross_entropy(logits, target, weight=w, ignore_index=ignore_index)
+    return nn.functional.cross_entropy(logits, target, weight=w, ignore_index=ignore_index,
+                                       label_smoothing=label_smoothing)  # fmt: skip
 
 
 def soft_dice_loss(
@@ -102,14 +107,22 @@ class SegmentationLoss(nn.Module):
     ``(C,)`` class weights (e.g. :func:`median_frequency_weights`). ``"ce_dice"`` is plain
     cross-entropy plus soft Dice with equal weights (as nnU-Net trains): the CE term gives every
     pixel a gradient from the start, where Dice alone can sit at background-only.
+    ``label_smoothing`` ε (`learn.config.TrainConfig.label_smoothing`) applies to the CE terms.
     """
 
     NAMES = ("ce", "weighted_ce", "dice", "generalized_dice", "ce_dice")
 
-    def __init__(self, name: str = "ce", weights: Sequence[float] | np.ndarray | None = None):
+    def __init__(self, name: str = "ce", weights: Sequence[float] | np.ndarray | None = None,
+                 label_smoothing: float = 0.0):  # fmt: skip
         super().__init__()
         if name not in self.NAMES:
             raise ConfigError(f"unknown loss {name!r}; choose one of: {', '.join(self.NAMES)}")
+        if label_smoothing and name in ("dice", "generalized_dice"):
+            raise ConfigError(f"label smoothing applies to cross-entropy, not loss {name!r}. "
+                              "Fix: label_smoothing = 0, or loss ce / weighted_ce / ce_dice")
+        if not 0 <= label_smoothing < 1:
+            raise ConfigError(f"label_smoothing must be in [0, 1), not {label_smoothing}")
+        self.label_smoothing = float(label_smoothing)
         if name == "weighted_ce" and weights is None:
             raise ConfigError("loss 'weighted_ce' needs class weights (median_frequency_weights)")
         self.name = name
@@ -119,7 +132,9 @@ class SegmentationLoss(nn.Module):
     def forward(self, logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """Scalar loss of ``logits (B, C, ...)`` against ``target (B, ...)`` int64."""
         if self.name == "ce_dice":
-            return weighted_cross_entropy(logits, target) + soft_dice_loss(logits, target)
+            return (weighted_cross_entropy(logits, target, label_smoothing=self.label_smoothing)
+                    + soft_dice_loss(logits, target))  # fmt: skip
         if self.name.endswith("dice"):
             return soft_dice_loss(logits, target, generalized=self.name == "generalized_dice")
-        return weighted_cross_entropy(logits, target, self.weights)
+        return weighted_cross_entropy(logits, target, self.weights,
+                                      label_smoothing=self.label_smoothing)  # fmt: skip

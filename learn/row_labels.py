@@ -45,9 +45,10 @@ def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `INT8_SUFFIX` for an
     int8 network and `TTA_SUFFIX` for test-time flips); where two rows would share a label, the
     input size, then the width multiplier, the initialisation, the training epochs, the
-    training precision, the training views, the weight averaging, the seed (each when theirs
-    differ), then the training data, then the run folder, then the file's name (``best.pt``,
-    ``best_int8.pt``, ...; when theirs differ), added. Labels are unique: rows still alike are
+    optimizer and weight decay, the training precision, the training views (and mixup), the
+    weight averaging, the label smoothing, the seed (each when theirs differ), then the
+    training data, then the run folder, then the file's name (``best.pt``, ``best_int8.pt``,
+    ...; when theirs differ), added. Labels are unique: rows still alike are
     numbered (``#2``, ...), so a report never merges two of them."""
     labels = [method_label(r) + (INT8_SUFFIX if r.get("int8") else "")
               + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]  # fmt: skip
@@ -55,9 +56,11 @@ def row_labels(rows: list[dict]) -> list[str]:
                                    (lambda r: width_label(r) or "default width", True),
                                    (init_label, True),
                                    (epochs_label, True),
+                                   (optimizer_label, True),
                                    (precision_label, True),
                                    (views_label, True),
                                    (averaging_label, True),
+                                   (smoothing_label, True),
                                    (lambda r: f"seed {r.get('seed')}", True),
                                    (data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False),
@@ -107,6 +110,20 @@ def epochs_label(r: dict) -> str:
     return "epochs unknown" if n is None else f"{n} epochs"
 
 
+#: Optimizer names of `optimizer_label` (`learn.config.OPTIMIZERS`).
+OPTIMIZER_NAMES = {"sgdm": "SGDM", "adam": "Adam", "adamw": "AdamW"}
+
+
+def optimizer_label(r: dict) -> str:
+    """``<optimizer> wd <weight decay>`` of a report row's training (`learn.config.TrainConfig`;
+    ``optimizer unknown`` when its checkpoint does not say)."""
+    train = (r.get("config") or {}).get("train") or {}
+    if not train.get("optimizer"):
+        return "optimizer unknown"
+    name = OPTIMIZER_NAMES.get(train["optimizer"], train["optimizer"])
+    return f"{name} wd {train.get('weight_decay', 0):g}"
+
+
 def trained_precision(r: dict) -> str:
     """``fp32`` or ``bf16``, the number format of a report row's training forward pass
     (`learn.train.RunConfig.precision`; checkpoints from before it was recorded: fp32)."""
@@ -121,12 +138,14 @@ def precision_label(r: dict) -> str:
 def views_label(r: dict) -> str:
     """The training views of a report row's network: ``no flips``, ``flips`` (the paper's
     three views) or ``flips + 180°`` (`learn.train.RunConfig.rot180`, a fourth), then
-    `` + shifts ±<n> px`` for random shifts (`learn.train.RunConfig.shift_px`)."""
+    `` + shifts ±<n> px`` for random shifts (`learn.train.RunConfig.shift_px`) and `` + mixup
+    α <a>`` for mixup (`learn.train.RunConfig.mixup_alpha`)."""
     cfg = r.get("config") or {}
     flips = "flips" if cfg.get("flips", True) else "no flips"
-    shift = cfg.get("shift_px") or 0
-    return flips + (" + 180°" if cfg.get("rot180") else "") + (f" + shifts ±{shift} px"
-                                                                if shift else "")
+    shift, alpha = cfg.get("shift_px") or 0, cfg.get("mixup_alpha") or 0.0
+    return (flips + (" + 180°" if cfg.get("rot180") else "")
+            + (f" + shifts ±{shift} px" if shift else "")
+            + (f" + mixup α {alpha:g}" if alpha else ""))  # fmt: skip
 
 
 def averaging_label(r: dict) -> str:
@@ -134,6 +153,13 @@ def averaging_label(r: dict) -> str:
     (`learn.config.TrainConfig.ema_decay`; checkpoints from before it existed: none)."""
     decay = ((r.get("config") or {}).get("train") or {}).get("ema_decay") or 0.0
     return f"EMA {decay:g}" if decay else "no EMA"
+
+
+def smoothing_label(r: dict) -> str:
+    """``label smoothing <eps>`` or ``no label smoothing`` of a report row's training loss
+    (`learn.config.TrainConfig.label_smoothing`; checkpoints from before it existed: none)."""
+    eps = ((r.get("config") or {}).get("train") or {}).get("label_smoothing") or 0.0
+    return f"label smoothing {eps:g}" if eps else "no label smoothing"
 
 
 def init_label(r: dict) -> str:

@@ -9,7 +9,7 @@ Images of the training split are read once (``learn.data`` / ``learn.folder``, r
 seeded permutation of the ``3 S`` (sample, view) pairs — the paper's threefold augmentation:
 original, horizontal flip, vertical flip; ``rot180`` adds both flips, a 180-degree turn, as a
 fourth view — and ``get_batch`` gathers and flips them (``shift_px`` then moves each at random,
-`learn.augment`). Epoch ``e``
+`learn.augment`; ``mixup_alpha`` mixes a classifier's batch with itself). Epoch ``e``
 reseeds torch from ``(seed, e)``, so a resumed run equals an uninterrupted one on CPU.
 """
 
@@ -25,7 +25,7 @@ import torch
 from torch import nn
 from tqdm.auto import tqdm
 
-from learn.augment import random_shift
+from learn.augment import mixup, random_shift
 from learn.averaging import make_ema
 from learn.checkpoint import (
     BEST,
@@ -99,13 +99,14 @@ def get_batch(data: TensorData, items: torch.Tensor,
     return flip_views(x, view), (flip_views(y, view) if y.ndim == 3 else y)
 
 
-def make_loss(run: RunConfig, train: TensorData) -> nn.Module:
-    """The configured loss; weighted CE takes median-frequency weights of the training targets."""
+def make_loss(run: RunConfig, train: TensorData, validation: bool = False) -> nn.Module:
+    """The configured loss; weighted CE takes median-frequency weights of the training targets.
+    ``validation``: without label smoothing, so validation losses compare across runs."""
     name = run.train.loss
     if run.task == "classify" and name.endswith("dice"):
         raise ConfigError(f"loss {name!r} is for segmentation; use ce or weighted_ce")
     weights = class_weights(train.y, run.model.num_classes) if name == "weighted_ce" else None
-    return SegmentationLoss(name, weights)
+    return SegmentationLoss(name, weights, 0.0 if validation else run.train.label_smoothing)
 
 
 def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool):
@@ -120,6 +121,7 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
     for start in bar:
         x, y = get_batch(data, order[start : start + run.train.batch_size], views)
         x, y = random_shift(x, y, run.shift_px)
+        x, y = mixup(x, y, run.mixup_alpha, run.model.num_classes)
         x, y = x.to(run.device), y.to(run.device)
         value = train_step(model, loss_fn, optimizer, x, y, run.task, run.precision)
         total += value * len(y)
@@ -246,6 +248,7 @@ def fit(
     ema = make_ema(model, optimizer, run.train.ema_decay)
     scored = model if ema is None else ema.module  # the weights validated, selected and kept
     loss_fn = make_loss(run, data.train).to(run.device)
+    val_loss_fn = make_loss(run, data.train, validation=True).to(run.device)
     start, best, history, best_state = 0, float("nan"), [], _state(scored)
     if resume and out is not None and (out / LAST).is_file():
         start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler,
@@ -259,7 +262,8 @@ def fit(
     for epoch in range(start, run.train.epochs):
         if on_epoch is not None:
             on_epoch(epoch, optimizer)
-        row = _one_epoch(model, data, loss_fn, optimizer, run, epoch, progress, scored)
+        row = _one_epoch(model, data, (loss_fn, val_loss_fn), optimizer, run, epoch, progress,
+                         scored)  # fmt: skip
         scheduler.step()
         history.append(row)
         if _improved(row.get("val_metric", float("nan")), best) or data.val is None:
@@ -309,16 +313,18 @@ def _check_stop(stop_after_epoch: int | None, start: int, epochs: int, last: Pat
 
 
 @flushing()
-def _one_epoch(model, data: Data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool,
+def _one_epoch(model, data: Data, loss_fns, optimizer, run: RunConfig, epoch: int, progress: bool,
                scored: nn.Module | None = None):  # fmt: skip
     """Train one epoch and validate ``scored`` (default ``model``; the weight average when there
-    is one): a history row (losses, val metric, lr of each group)."""
+    is one): a history row (losses, val metric, lr of each group). ``loss_fns``: (training,
+    validation) losses."""
+    loss_fn, val_loss_fn = loss_fns
     tic = time.perf_counter()
     row = {"epoch": epoch + 1, "lr": [g["lr"] for g in optimizer.param_groups]}
     row["train_loss"] = train_epoch(model, data.train, loss_fn, optimizer, run, epoch, progress)
     if data.val is not None:
         res = evaluate_tensors(model if scored is None else scored, data.val,
-                               run.model.num_classes, run.eval_batch_size, loss_fn)
+                               run.model.num_classes, run.eval_batch_size, val_loss_fn)
         row["val_loss"], row["val_metric"] = res.loss, res.metrics[metric_name(run.task)]
     row["seconds"] = time.perf_counter() - tic
     return row

@@ -1,4 +1,5 @@
-"""Random translation of training batches (`learn.augment`, `RunConfig.shift_px`)."""
+"""Batch augmentations (`learn.augment`): random shifts (`RunConfig.shift_px`) and mixup
+(`RunConfig.mixup_alpha`)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from learn.augment import random_shift
+from learn.augment import mix_batch, mixup, random_shift
 from learn.train import fit, load_data
 from tactile.errors import ConfigError
 
@@ -76,5 +77,60 @@ def test_training_with_shifts_repeats_to_the_bit_and_differs_from_without(tiny_d
     shifted = dataclasses.replace(run, shift_px=3)
     a = fit(shifted, data, None, progress=False).history[0]["train_loss"]
     b = fit(shifted, data, None, progress=False).history[0]["train_loss"]
+    plain = fit(run, data, None, progress=False).history[0]["train_loss"]
+    assert a == b and a != plain
+
+
+def test_mix_batch_matches_a_loop_over_items():
+    rng = np.random.default_rng(1)
+    x = rng.random((5, 1, 4, 6)).astype(np.float32)
+    y = rng.integers(0, 3, 5)
+    perm = np.array([2, 0, 4, 1, 3])
+    lam = 0.35
+    xm, q = mix_batch(torch.from_numpy(x), torch.from_numpy(y), lam, torch.from_numpy(perm), 3)
+    for i in range(5):
+        np.testing.assert_allclose(xm[i].numpy(), lam * x[i] + (1 - lam) * x[perm[i]], rtol=1e-6)
+        expected = np.zeros(3)
+        expected[y[i]] += lam
+        expected[y[perm[i]]] += 1 - lam
+        np.testing.assert_allclose(q[i].numpy(), expected, rtol=1e-6)
+    with pytest.raises(ValueError, match="label images"):
+        mix_batch(torch.from_numpy(x), torch.zeros(5, 4, 6, dtype=torch.int64), lam,
+                  torch.from_numpy(perm), 3)  # fmt: skip
+
+
+def test_mixup_weights_follow_beta_and_alpha_zero_is_the_identity():
+    """Two items of classes 0 and 1: when mixup pairs each with the other, item 0's target puts
+    lam on class 0; those lams must follow scipy's Beta(alpha, alpha)."""
+    from scipy import stats
+
+    torch.manual_seed(0)
+    x, y = torch.stack([torch.zeros(1, 2, 2), torch.ones(1, 2, 2)]), torch.tensor([0, 1])
+    lams = []
+    for _ in range(4000):
+        xm, q = mixup(x, y, 0.4, 2)
+        if q[0, 1] > 0 or xm[0].max() > 0:  # paired with item 1 (lam = 1 exactly is improbable)
+            lams.append(float(q[0, 0]))
+            assert float(xm[0, 0, 0, 0]) == pytest.approx(1 - lams[-1], abs=1e-6)
+    assert 1700 < len(lams) < 2300  # half the permutations swap the two
+    assert stats.kstest(lams, stats.beta(0.4, 0.4).cdf).pvalue > 0.01
+    assert mixup(x, y, 0.0, 2) == (x, y)
+    with pytest.raises(ValueError, match="alpha"):
+        mixup(x, y, -1.0, 2)
+
+
+def test_mixup_is_checked_before_training_and_trains_reproducibly(tiny_dataset, tiny_run):
+    from learn.train import RunConfig
+
+    with pytest.raises(ConfigError, match=r"mixup_alpha.*classifier.*Fix"):
+        dataclasses.replace(tiny_run("segnet"), mixup_alpha=0.2)
+    with pytest.raises(ConfigError, match="mixup_alpha"):
+        RunConfig(mixup_alpha=-0.5)
+    torch.set_num_threads(1)
+    run = tiny_run("handsnet", epochs=1)
+    data = load_data(tiny_dataset, run)
+    mixed = dataclasses.replace(run, mixup_alpha=0.4)
+    a = fit(mixed, data, None, progress=False).history[0]["train_loss"]
+    b = fit(mixed, data, None, progress=False).history[0]["train_loss"]
     plain = fit(run, data, None, progress=False).history[0]["train_loss"]
     assert a == b and a != plain

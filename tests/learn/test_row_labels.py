@@ -57,6 +57,21 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     assert row_labels([s0, s1, *ema]) == [
         "SegNet, no EMA, seed 0", "SegNet, no EMA, seed 1", "SegNet, EMA 0.998, seed 0",
         "SegNet, EMA 0.998, seed 1"]  # fmt: skip
+    # ... or with mixup, or label smoothing (neither recorded: none)
+    hn = [dict(s, arch="handsnet") for s in (s0, s1)]
+    mixed = dict(hn[0], config={**long["config"], "mixup_alpha": 0.2}, checkpoint="/r/m/best.pt")
+    smooth = dict(hn[0], config={**long["config"], "train": {"epochs": 30,
+                  "label_smoothing": 0.1}}, checkpoint="/r/ls/best.pt")  # fmt: skip
+    assert row_labels([*hn, mixed, smooth]) == [
+        "HandsNet, flips, no label smoothing, seed 0",
+        "HandsNet, flips, no label smoothing, seed 1", "HandsNet, flips + mixup α 0.2",
+        "HandsNet, flips, label smoothing 0.1"]  # fmt: skip
+    # ... or with another optimizer or weight decay
+    adamw = dict(hn[0], config={**long["config"], "train": {"epochs": 30, "optimizer": "adamw",
+                 "weight_decay": 0.05}}, checkpoint="/r/aw/best.pt")  # fmt: skip
+    adam = dict(hn[0], config={**long["config"], "train": {"epochs": 30, "optimizer": "adam",
+                "weight_decay": 1e-4}})  # fmt: skip
+    assert row_labels([adam, adamw]) == ["HandsNet, Adam wd 0.0001", "HandsNet, AdamW wd 0.05"]
     # fine-tuned from another run's checkpoint: its run folder, before the epochs (none
     # recorded: said only where it differs)
     scratch = [dict(long, init="random", train_data={"path": f"/d/{d}", "n_train": 9})

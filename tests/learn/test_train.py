@@ -199,3 +199,40 @@ def test_crossval_folds_are_group_disjoint(tiny_dataset, tiny_run):
     assert cv.best_run.train.lr == cv.best_changes["train.lr"]
     with pytest.raises(ConfigError, match="key=v1"):
         parse_grid("train.lr")
+
+
+def test_label_smoothing_trains_on_smoothed_targets_but_validates_on_plain_ce(tiny_dataset,
+                                                                             tiny_run):  # fmt: skip
+    from learn.losses import SegmentationLoss
+
+    torch.set_num_threads(1)
+    run = tiny_run("handsnet", epochs=1, label_smoothing=0.2)
+    data = load_data(tiny_dataset, run)
+    assert data.val is not None
+    res = fit(run, data, None, progress=False)
+    plain = evaluate_tensors(res.model, data.val, 2, run.eval_batch_size, SegmentationLoss("ce"))
+    assert res.history[0]["val_loss"] == pytest.approx(plain.loss, rel=1e-6)
+    smoothed = evaluate_tensors(res.model, data.val, 2, run.eval_batch_size,
+                                SegmentationLoss("ce", None, 0.2))  # fmt: skip
+    assert smoothed.loss != pytest.approx(plain.loss, rel=1e-3)
+    unsmoothed = fit(replace_train(run, label_smoothing=0.0), data, None, progress=False)
+    assert unsmoothed.history[0]["train_loss"] != res.history[0]["train_loss"]
+
+
+@pytest.mark.parametrize(("optimizer", "expected"),
+                         [("adamw", 0.95), ("adam", 0.9), ("sgdm", 0.95)])  # fmt: skip
+def test_weight_decay_alone_moves_a_weight_as_each_optimizer_defines(optimizer, expected):
+    """With a zero loss gradient, one step from w = 1 (lr 0.1, weight_decay 0.5): AdamW decays
+    by lr * wd (w = 0.95, Loshchilov & Hutter); Adam's L2 term is normalised by its own
+    running scale, a step of ~lr (w ~ 0.9); SGD's first step is lr * wd * w (0.95)."""
+    from learn.config import TrainConfig
+    from learn.finetune import make_optimizer
+
+    model = torch.nn.Linear(1, 1, bias=False)
+    torch.nn.init.ones_(model.weight)
+    opt = make_optimizer(model, TrainConfig(optimizer=optimizer, lr=0.1, weight_decay=0.5))
+    (model.weight * 0.0).sum().backward()
+    opt.step()
+    assert model.weight.item() == pytest.approx(expected, abs=1e-6)
+    with pytest.raises(ConfigError, match="adamw"):
+        TrainConfig(optimizer="rmsprop")
