@@ -70,15 +70,19 @@ def test_shift_is_range_checked_before_training():
         RunConfig(shift_px=35)  # input 68 x 100: at most 34
 
 
-def test_training_with_shifts_repeats_to_the_bit_and_differs_from_without(tiny_dataset, tiny_run):
+def repeats_and_differs(dataset, run, **change) -> bool:
+    """Whether one epoch of ``run`` with ``change`` gives the same training loss twice, and
+    another one than ``run`` without it."""
     torch.set_num_threads(1)
-    run = tiny_run("segnet", epochs=1)
-    data = load_data(tiny_dataset, run)
-    shifted = dataclasses.replace(run, shift_px=3)
-    a = fit(shifted, data, None, progress=False).history[0]["train_loss"]
-    b = fit(shifted, data, None, progress=False).history[0]["train_loss"]
-    plain = fit(run, data, None, progress=False).history[0]["train_loss"]
-    assert a == b and a != plain
+    data = load_data(dataset, run)
+    changed = dataclasses.replace(run, **change)
+    a, b, plain = (fit(r, data, None, progress=False).history[0]["train_loss"]
+                   for r in (changed, changed, run))  # fmt: skip
+    return a == b and a != plain
+
+
+def test_training_with_shifts_repeats_to_the_bit_and_differs_from_without(tiny_dataset, tiny_run):
+    assert repeats_and_differs(tiny_dataset, tiny_run("segnet", epochs=1), shift_px=3)
 
 
 def test_mix_batch_matches_a_loop_over_items():
@@ -126,11 +130,4 @@ def test_mixup_is_checked_before_training_and_trains_reproducibly(tiny_dataset, 
         dataclasses.replace(tiny_run("segnet"), mixup_alpha=0.2)
     with pytest.raises(ConfigError, match="mixup_alpha"):
         RunConfig(mixup_alpha=-0.5)
-    torch.set_num_threads(1)
-    run = tiny_run("handsnet", epochs=1)
-    data = load_data(tiny_dataset, run)
-    mixed = dataclasses.replace(run, mixup_alpha=0.4)
-    a = fit(mixed, data, None, progress=False).history[0]["train_loss"]
-    b = fit(mixed, data, None, progress=False).history[0]["train_loss"]
-    plain = fit(run, data, None, progress=False).history[0]["train_loss"]
-    assert a == b and a != plain
+    assert repeats_and_differs(tiny_dataset, tiny_run("handsnet", epochs=1), mixup_alpha=0.4)
