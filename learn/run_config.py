@@ -49,9 +49,9 @@ class RunConfig:
     shift_px: int = 0
     # mixup (`learn.augment.mixup`, classifiers only): every training batch mixed with a
     # shuffled copy of itself, images and one-hot targets alike, by lam ~ Beta(alpha, alpha);
-    # 0 = off (the paper). Measured at 0.2 on the paper-sized forearm set, seeds 0, 1, 2:
-    # HandsNet 92.39, 93.05, 91.34 % against the preset's 91.82, 89.63, 91.44 % (only seed 1's
-    # gain beyond test-set luck; docs/learning.md, "Regularisers"), so it is off by default.
+    # 0 = off (the paper). Measured at 0.2 on the paper-sized forearm set, seeds 0-3: HandsNet
+    # 92.39, 93.05, 91.34, 91.82 % against the preset's 91.82, 89.63, 91.44, 92.01 % (only seed
+    # 1's gain beyond test-set luck; docs/learning.md, "Regularisers"), so it is off by default.
     mixup_alpha: float = 0.0
     threads: int = 2  # torch CPU threads (the project's machines have 2 shared cores)
     # number format of the training forward pass: "fp32", or "bf16" to autocast convolutions and
