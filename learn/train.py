@@ -248,7 +248,8 @@ def fit(
     ema = make_ema(model, optimizer, run.train.ema_decay)
     scored = model if ema is None else ema.module  # the weights validated, selected and kept
     loss_fn = make_loss(run, data.train).to(run.device)
-    val_loss_fn = make_loss(run, data.train, validation=True).to(run.device)
+    val_loss_fn = (make_loss(run, data.train, validation=True).to(run.device)
+                   if run.train.label_smoothing else loss_fn)  # fmt: skip
     start, best, history, best_state = 0, float("nan"), [], _state(scored)
     if resume and out is not None and (out / LAST).is_file():
         start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler,
