@@ -140,10 +140,12 @@ def _split(targets: np.ndarray, split: str | None, test_fraction: float, seed: i
 
 @dataclass
 class TensorData:
-    """Images ``x`` (S, 1, h, w) float32 in [0, 1] and targets ``y`` (S,) or (S, h, w) int64."""
+    """Images ``x`` (S, 1, h, w) float32 in [0, 1] and targets ``y`` (S,) or (S, h, w) int64;
+    ``types`` (S,) int64 contactor-type ids (`learn.aux_types`) when a run asks for them."""
 
     x: torch.Tensor
     y: torch.Tensor
+    types: torch.Tensor | None = None
 
 
 @dataclass
@@ -155,6 +157,7 @@ class Data:
     test: TensorData | None
     class_names: tuple[str, ...]
     description: dict[str, object]
+    type_names: tuple[str, ...] = ()  # names of ``train.types`` ids, when loaded
 
 
 def materialize(ds: Dataset, desc: str = "reading", progress: bool = True) -> TensorData:
@@ -254,7 +257,22 @@ def load_data(path: str | Path, run, *, hand_classes: Sequence[str] | None = Non
             "n_train": len(train_ds), "n_val": _len(val_ds), "n_test": _len(test_ds)}  # fmt: skip
     val = None if val_ds is None else materialize(val_ds, "val", progress)
     test = None if test_ds is None else materialize(test_ds, "test", progress)
-    return Data(materialize(train_ds, "train", progress), val, test, names, desc)
+    train = materialize(train_ds, "train", progress)
+    type_names: tuple[str, ...] = ()
+    if getattr(run, "aux_types_weight", 0.0):
+        train.types, type_names = _types(path, train_ds, train.y)
+    return Data(train, val, test, names, desc, type_names)
+
+
+def _types(path: Path, ds: Dataset, y: torch.Tensor) -> tuple[torch.Tensor, tuple[str, ...]]:
+    """Contactor-type ids (S,) of the samples of ``ds`` (classes ``y``) and their names."""
+    from learn.aux_types import type_targets
+
+    if not is_dataset(path):
+        raise ConfigError(f"{path} is an image folder, which records no contactor types. Fix: "
+                          "aux_types_weight = 0, or train on a handskin dataset")  # fmt: skip
+    ids, names = type_targets(path, np.asarray(ds.indices), y.numpy() == 1)
+    return torch.from_numpy(ids), names
 
 
 def _len(ds: Dataset | None) -> int:

@@ -46,7 +46,8 @@ def row_labels(rows: list[dict]) -> list[str]:
     int8 network and `TTA_SUFFIX` for test-time flips); where two rows would share a label, the
     input size, then the width multiplier, the initialisation, the training epochs, the
     optimizer and weight decay, the training precision, the training views (and mixup), the
-    weight averaging, the label smoothing, the seed (each when theirs differ), then the
+    weight averaging, the label smoothing, the contactor-type head, the seed (each when theirs
+    differ), then the
     training data, then the run folder, then the file's name (``best.pt``, ``best_int8.pt``,
     ...; when theirs differ), added. Labels are unique: rows still alike are
     numbered (``#2``, ...), so a report never merges two of them."""
@@ -61,6 +62,7 @@ def row_labels(rows: list[dict]) -> list[str]:
                                    (views_label, True),
                                    (averaging_label, True),
                                    (smoothing_label, True),
+                                   (types_label, True),
                                    (lambda r: f"seed {r.get('seed')}", True),
                                    (data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False),
@@ -160,6 +162,13 @@ def smoothing_label(r: dict) -> str:
     (`learn.config.TrainConfig.label_smoothing`; checkpoints from before it existed: none)."""
     eps = ((r.get("config") or {}).get("train") or {}).get("label_smoothing") or 0.0
     return f"label smoothing {eps:g}" if eps else "no label smoothing"
+
+
+def types_label(r: dict) -> str:
+    """``type head <weight>`` or ``no type head``: a report row's auxiliary contactor-type loss
+    (`learn.train.RunConfig.aux_types_weight`; checkpoints from before it existed: none)."""
+    weight = (r.get("config") or {}).get("aux_types_weight") or 0.0
+    return f"type head {weight:g}" if weight else "no type head"
 
 
 def init_label(r: dict) -> str:

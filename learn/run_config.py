@@ -53,6 +53,11 @@ class RunConfig:
     # 92.39, 93.05, 91.34, 91.82 % against the preset's 91.82, 89.63, 91.44, 92.01 % (only seed
     # 1's gain beyond test-set luck; docs/learning.md, "Regularisers"), so it is off by default.
     mixup_alpha: float = 0.0
+    # weight of an auxiliary loss (`learn.aux_types`, classifiers on a handskin dataset): a
+    # linear head on the last hidden layer learns the contactor's type (hand, object: rake,
+    # body: elbow, ...) beside the class; used in training only, checkpoints hold the plain
+    # network. 0 = off (the paper). Measured: docs/learning.md, "Contactor types".
+    aux_types_weight: float = 0.0
     threads: int = 2  # torch CPU threads (the project's machines have 2 shared cores)
     # number format of the training forward pass: "fp32", or "bf16" to autocast convolutions and
     # matrix products to bfloat16 (torch.autocast) while weights, optimizer state, loss and
@@ -81,6 +86,18 @@ class RunConfig:
                 f"RunConfig.mixup_alpha={self.mixup_alpha} (arch {self.model.arch!r}): mixup "
                 "mixes class targets, so it needs alpha >= 0 and a classifier (handsnet, vgg16). "
                 "Fix: mixup_alpha = 0 (off) or e.g. 0.2 with a classifier"
+            )
+        if self.aux_types_weight < 0 or (self.aux_types_weight and self.task != "classify"):
+            raise ConfigError(
+                f"RunConfig.aux_types_weight={self.aux_types_weight} (arch "
+                f"{self.model.arch!r}): the type head learns what touched beside hand / "
+                "non-hand, so it needs a weight >= 0 and a classifier (handsnet, vgg16). Fix: "
+                "aux_types_weight = 0 (off) or e.g. 1.0 with a classifier"
+            )
+        if self.aux_types_weight and self.mixup_alpha:
+            raise ConfigError(
+                "RunConfig: aux_types_weight and mixup_alpha together would need mixed type "
+                "targets, which the type head does not take. Fix: set one of them to 0"
             )
         if self.patience_epochs < 0 or self.threads < 1 or self.eval_batch_size < 1:
             raise ConfigError("RunConfig: patience_epochs >= 0, threads >= 1, eval_batch_size >= 1")

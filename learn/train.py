@@ -9,7 +9,8 @@ Images of the training split are read once (``learn.data`` / ``learn.folder``, r
 seeded permutation of the ``3 S`` (sample, view) pairs — the paper's threefold augmentation:
 original, horizontal flip, vertical flip; ``rot180`` adds both flips, a 180-degree turn, as a
 fourth view — and ``get_batch`` gathers and flips them (``shift_px`` then moves each at random,
-`learn.augment`; ``mixup_alpha`` mixes a classifier's batch with itself). Epoch ``e``
+`learn.augment`; ``mixup_alpha`` mixes a classifier's batch with itself; ``aux_types_weight``
+adds a contactor-type loss, `learn.aux_types`). Epoch ``e``
 reseeds torch from ``(seed, e)``, so a resumed run equals an uninterrupted one on CPU.
 """
 
@@ -26,6 +27,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from learn.augment import mixup, random_shift
+from learn.aux_types import TypeHead
 from learn.averaging import make_ema
 from learn.checkpoint import (
     BEST,
@@ -109,9 +111,11 @@ def make_loss(run: RunConfig, train: TensorData, validation: bool = False) -> nn
     return SegmentationLoss(name, weights, 0.0 if validation else run.train.label_smoothing)
 
 
-def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool):
-    """One epoch over a seeded permutation of (sample, view) pairs; returns the mean loss.
-    Batches are drawn and augmented on the CPU, then moved to ``run.device``."""
+def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool,
+                head: TypeHead | None = None):  # fmt: skip
+    """One epoch over a seeded permutation of (sample, view) pairs; returns the mean loss (with
+    the type head's term when there is one). Batches are drawn and augmented on the CPU, then
+    moved to ``run.device``."""
     torch.manual_seed(epoch_seed(run.train.seed, epoch))
     views = views_of(run)
     order = torch.randperm(len(data.y) * len(views))
@@ -119,19 +123,23 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
     total, bar = 0.0, tqdm(range(0, len(order), run.train.batch_size), disable=not progress,
                            desc=f"epoch {epoch + 1}/{run.train.epochs}", leave=False)  # fmt: skip
     for start in bar:
-        x, y = get_batch(data, order[start : start + run.train.batch_size], views)
+        items = order[start : start + run.train.batch_size]
+        x, y = get_batch(data, items, views)
         x, y = random_shift(x, y, run.shift_px)
         x, y = mixup(x, y, run.mixup_alpha, run.model.num_classes)
         x, y = x.to(run.device), y.to(run.device)
-        value = train_step(model, loss_fn, optimizer, x, y, run.task, run.precision)
+        aux = None if head is None else (head, data.types[items // len(views)].to(run.device))
+        value = train_step(model, loss_fn, optimizer, x, y, run.task, run.precision, aux)
         total += value * len(y)
         bar.set_postfix(loss=f"{value:.4f}")
     return total / len(order)
 
 
 def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task: str,
-               precision: str = "fp32") -> float:  # fmt: skip
+               precision: str = "fp32",
+               aux: tuple[TypeHead, torch.Tensor] | None = None) -> float:  # fmt: skip
     """One optimisation step on images ``x`` (B, 1, h, w) and targets ``y``; returns the loss.
+    ``aux``: a type head and the batch's type ids (B,), whose weighted loss is added.
 
     Classifiers get channels-last input (their weights are channels-last, see :func:`build`).
     ``precision="bf16"`` runs the forward pass under bfloat16 autocast (`RunConfig.precision`)
@@ -140,8 +148,15 @@ def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task
     if task == "classify":
         x = x.contiguous(memory_format=torch.channels_last)
     with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=precision == "bf16"):
-        out = model(x)
+        if aux is None:
+            out = model(x)
+        else:
+            with aux[0].capture(model):
+                out = model(x)
+            type_logits = aux[0]()
     loss = loss_fn(out.float(), y)
+    if aux is not None:
+        loss = loss + aux[0].loss(type_logits, aux[1])
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
     optimizer.step()
@@ -167,8 +182,10 @@ def check_precision(run: RunConfig) -> None:
         )
 
 
-def build(run: RunConfig, init_from: str | Path | None = None):
-    """Model (seeded init, optionally loaded from a checkpoint), optimizer and step schedule."""
+def build(run: RunConfig, init_from: str | Path | None = None, num_types: int = 0):
+    """Model (seeded init, optionally loaded from a checkpoint), optimizer, step schedule, and
+    with ``num_types`` a type head (`learn.aux_types`, its weights in an optimizer group of its
+    own at the run's lr; else None)."""
     torch.manual_seed(run.train.seed)
     model = create_model(run.model.arch, **run.model.kwargs())
     if init_from is not None:
@@ -177,16 +194,21 @@ def build(run: RunConfig, init_from: str | Path | None = None):
         model = model.to(memory_format=torch.channels_last)
     model = model.to(run.device)  # before the optimizer, whose state follows the parameters
     optimizer = make_optimizer(model, run.train)
-    return model, optimizer, make_scheduler(optimizer, run.train)
+    head = None
+    if num_types:
+        head = TypeHead(model, num_types, run.aux_types_weight).to(run.device)
+        optimizer.add_param_group({"params": list(head.parameters())})
+    return model, optimizer, make_scheduler(optimizer, run.train), head
 
 
 def _state(model: nn.Module) -> dict[str, torch.Tensor]:
     return {k: v.detach().clone() for k, v in model.state_dict().items()}
 
 
-def _restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None):
+def _restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None, head=None):
     """(start epoch, best metric, history, best weights, recorded start) of the run in ``out``
-    (last.pt); loads the weights, optimizer, schedule and weight average (``ema``) in place."""
+    (last.pt); loads the weights, optimizer, schedule, weight average (``ema``) and type head
+    (``head``) in place."""
     ckpt = load_checkpoint(out / LAST)
     try:  # keys added since the checkpoint was written take their defaults (the old behaviour)
         theirs = to_dict(run_from_dict(ckpt["config"]))
@@ -208,6 +230,8 @@ def _restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None):
     scheduler.load_state_dict(ckpt["scheduler"])
     if ema is not None:
         ema.load_state_dict(ckpt["ema"])
+    if head is not None:
+        head.load_state_dict(ckpt["type_head"])
     best_state = load_checkpoint(out / BEST)["model"] if (out / BEST).is_file() else _state(model)
     return (int(ckpt["epoch"]), float(ckpt["best_metric"]), list(ckpt["history"]), best_state,
             ckpt.get("init"))  # fmt: skip
@@ -244,7 +268,7 @@ def fit(
     check_precision(run)
     torch.set_num_threads(run.threads)
     out = None if out_dir is None else Path(out_dir)
-    model, optimizer, scheduler = build(run, init_from)
+    model, optimizer, scheduler, head = build(run, init_from, _num_types(run, data))
     ema = make_ema(model, optimizer, run.train.ema_decay)
     scored = model if ema is None else ema.module  # the weights validated, selected and kept
     loss_fn = make_loss(run, data.train).to(run.device)
@@ -253,7 +277,7 @@ def fit(
     start, best, history, best_state = 0, float("nan"), [], _state(scored)
     if resume and out is not None and (out / LAST).is_file():
         start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler,
-                                                           ema)  # fmt: skip
+                                                           ema, head)  # fmt: skip
         init_from = first if first not in (None, "random") else init_from
     _check_stop(stop_after_epoch, start, run.train.epochs, None if out is None else out / LAST)
     if out is not None:
@@ -264,7 +288,7 @@ def fit(
         if on_epoch is not None:
             on_epoch(epoch, optimizer)
         row = _one_epoch(model, data, (loss_fn, val_loss_fn), optimizer, run, epoch, progress,
-                         scored)  # fmt: skip
+                         scored, head)  # fmt: skip
         scheduler.step()
         history.append(row)
         if _improved(row.get("val_metric", float("nan")), best) or data.val is None:
@@ -273,7 +297,7 @@ def fit(
             _save(out, BEST, scored, optimizer, scheduler, run, data, epoch, best, history,
                   init_from)
         _save(out, LAST, model, optimizer, scheduler, run, data, epoch, best, history, init_from,
-              ema=ema)
+              ema=ema, head=head)
         if out is not None:
             title = f"{run.model.arch}, seed {run.train.seed}"
             best_epoch = next((h["epoch"] for h in history if h.get("val_metric") == best), None)
@@ -315,20 +339,32 @@ def _check_stop(stop_after_epoch: int | None, start: int, epochs: int, last: Pat
 
 @flushing()
 def _one_epoch(model, data: Data, loss_fns, optimizer, run: RunConfig, epoch: int, progress: bool,
-               scored: nn.Module | None = None):  # fmt: skip
+               scored: nn.Module | None = None, head: TypeHead | None = None):  # fmt: skip
     """Train one epoch and validate ``scored`` (default ``model``; the weight average when there
     is one): a history row (losses, val metric, lr of each group). ``loss_fns``: (training,
     validation) losses."""
     loss_fn, val_loss_fn = loss_fns
     tic = time.perf_counter()
     row = {"epoch": epoch + 1, "lr": [g["lr"] for g in optimizer.param_groups]}
-    row["train_loss"] = train_epoch(model, data.train, loss_fn, optimizer, run, epoch, progress)
+    row["train_loss"] = train_epoch(model, data.train, loss_fn, optimizer, run, epoch, progress,
+                                    head)  # fmt: skip
     if data.val is not None:
         res = evaluate_tensors(model if scored is None else scored, data.val,
                                run.model.num_classes, run.eval_batch_size, val_loss_fn)
         row["val_loss"], row["val_metric"] = res.loss, res.metrics[metric_name(run.task)]
     row["seconds"] = time.perf_counter() - tic
     return row
+
+
+def _num_types(run: RunConfig, data: Data) -> int:
+    """How many contactor types the run's type head tells apart (0: no head)."""
+    if not run.aux_types_weight:
+        return 0
+    if data.train.types is None:
+        raise ConfigError("aux_types_weight is set but the training data carry no contactor "
+                          "types. Fix: load them with learn.train.load_data(path, run), which "
+                          "reads them for such a run")  # fmt: skip
+    return len(data.type_names)
 
 
 def patience_out(history: list[dict], run: RunConfig) -> bool:
@@ -341,10 +377,12 @@ def patience_out(history: list[dict], run: RunConfig) -> bool:
 
 
 def _save(out, name, model, optimizer, scheduler, run, data: Data, epoch, best, history,
-          init_from=None, ema=None) -> None:  # fmt: skip
+          init_from=None, ema=None, head=None) -> None:  # fmt: skip
     if out is None:
         return
     extra = {} if ema is None else {"ema": ema.state_dict()}  # last.pt: to resume the average
+    if head is not None:  # last.pt: to resume the type head (best.pt holds the plain network)
+        extra["type_head"] = head.state_dict()
     ckpt = make_checkpoint(
         model, to_dict(run), epoch=epoch + 1, best_metric=best, optimizer=optimizer,
         scheduler=scheduler, history=history, class_names=list(data.class_names),

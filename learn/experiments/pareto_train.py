@@ -49,7 +49,7 @@ def train_budgeted(run, train, budget_s: float, max_steps: float, init_from=None
 
     check_precision(run)
     torch.set_num_threads(run.threads)
-    model, optimizer, _ = build(run, init_from)
+    model, optimizer, _, _ = build(run, init_from)
     loss_fn, views = make_loss(run, train), views_of(run)
     steps, images, t0 = 0, 0, time.perf_counter()
     bar = tqdm(total=round(budget_s), disable=not progress, leave=False, unit="s",

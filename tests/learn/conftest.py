@@ -8,6 +8,8 @@ sector, so hand and non-hand images differ in shape, as in the real problem.
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -73,11 +75,23 @@ def as_object(row: dict) -> dict:
             "label_image": np.zeros_like(row["label_image"])}  # fmt: skip
 
 
+def with_contactor(row: dict) -> dict:
+    """``row`` with a ``contactor`` JSON as the generator writes it: hands right or left by
+    subject, non-hands a ball or a disc by instance."""
+    if row["is_hand"]:
+        c = {"kind": "hand", "type": ("right_hand", "left_hand")[int(row["subject_id"]) % 2]}
+    else:
+        c = {"kind": "object", "type": ("ball", "disc")[int(row["instance_id"]) % 2]}
+    return {**row, "contactor": json.dumps(c)}
+
+
 def write_tiny_dataset(folder, samples: list[int], drop: tuple[str, ...] = (),
-                       hands_as_objects: bool = False, split: str | None = None):  # fmt: skip
+                       hands_as_objects: bool = False, split: str | None = None,
+                       contactors: bool = False):  # fmt: skip
     """Write samples ``samples`` (`make_sample` numbering) of the tiny set to ``folder``,
     without the fields ``drop``, the hands recorded as objects if ``hands_as_objects``, split by
-    method ``split`` (None: the default, greedy); returns the folder."""
+    method ``split`` (None: the default, greedy), with a ``contactor`` JSON per sample if
+    ``contactors`` (`with_contactor`); returns the folder."""
     layout, flat_mm = cylinder_sector_layout(width_mm=60, length_mm=90, pitch_mm=5)
     tmap = TactileMap.build(layout)
     config = {"test": "tiny"} if split is None else {"test": "tiny", "split": split}
@@ -86,6 +100,7 @@ def write_tiny_dataset(folder, samples: list[int], drop: tuple[str, ...] = (),
                            attrs={"skin_counts_per_pa": GAIN})  # fmt: skip
     rows = [make_sample(i, tmap, flat_mm) for i in samples]
     rows = [as_object(r) for r in rows] if hands_as_objects else rows
+    rows = [with_contactor(r) for r in rows] if contactors else rows
     writer.write_chunk(0, [{k: v for k, v in r.items() if k not in drop} for r in rows])
     writer.merge()
     return folder

@@ -45,7 +45,7 @@ def test_bf16_step_computes_convolutions_in_bf16_and_keeps_weights_fp32(tiny_run
     run = tiny_run(arch)
     x, y = batch(run)
     for precision, dtype in (("fp32", torch.float32), ("bf16", torch.bfloat16)):
-        model, optimizer, _ = build(run)
+        model, optimizer, _, _ = build(run)
         loss_fn = T.make_loss(run, TensorData(x, y))
         seen: list[torch.dtype] = []
         conv = next(m for m in model.modules() if isinstance(m, nn.Conv2d))
@@ -95,7 +95,7 @@ def test_bf16_training_fits_one_batch(tiny_run, arch):
         cells = y[:, ::16, ::16].repeat_interleave(16, 1).repeat_interleave(16, 2)
         y = cells[:, : x.shape[2], : x.shape[3]]
         x = y[:, None].float() / run.model.num_classes
-    model, optimizer, _ = build(run)
+    model, optimizer, _, _ = build(run)
     for m in model.modules():
         if isinstance(m, nn.Dropout | nn.Dropout2d):
             m.p = 0.0

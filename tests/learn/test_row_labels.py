@@ -72,6 +72,12 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     adam = dict(hn[0], config={**long["config"], "train": {"epochs": 30, "optimizer": "adam",
                 "weight_decay": 1e-4}})  # fmt: skip
     assert row_labels([adam, adamw]) == ["HandsNet, Adam wd 0.0001", "HandsNet, AdamW wd 0.05"]
+    # ... or with a contactor-type head (none recorded: none), seed by seed
+    typed = [dict(h, config={**long["config"], "aux_types_weight": 1.0},
+                  checkpoint=f"/r/t{h['seed']}/best.pt") for h in hn]  # fmt: skip
+    assert row_labels([*hn, *typed]) == [
+        "HandsNet, no type head, seed 0", "HandsNet, no type head, seed 1",
+        "HandsNet, type head 1, seed 0", "HandsNet, type head 1, seed 1"]
     # fine-tuned from another run's checkpoint: its run folder, before the epochs (none
     # recorded: said only where it differs)
     scratch = [dict(long, init="random", train_data={"path": f"/d/{d}", "n_train": 9})
