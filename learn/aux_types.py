@@ -11,7 +11,7 @@ network), so evaluation, prediction, int8 and compiled inference see no differen
     head = TypeHead(model, num_types=len(names), weight=1.0)
     with head.capture(model):
         logits = model(x)                      # (B, 2)
-    loss = ce(logits, y) + head.loss(types)    # types (B,) int64 ids into names
+    loss = ce(logits, y) + head.loss(head(), types)   # types (B,) int64 ids into names
 """
 
 from __future__ import annotations

@@ -259,7 +259,7 @@ def load_data(path: str | Path, run, *, hand_classes: Sequence[str] | None = Non
     test = None if test_ds is None else materialize(test_ds, "test", progress)
     train = materialize(train_ds, "train", progress)
     type_names: tuple[str, ...] = ()
-    if getattr(run, "aux_types_weight", 0.0):
+    if run.aux_types_weight:
         train.types, type_names = _types(path, train_ds, train.y)
     return Data(train, val, test, names, desc, type_names)
 

@@ -47,9 +47,8 @@ def row_labels(rows: list[dict]) -> list[str]:
     input size, then the width multiplier, the initialisation, the training epochs, the
     optimizer and weight decay, the training precision, the training views (and mixup), the
     weight averaging, the label smoothing, the contactor-type head, the seed (each when theirs
-    differ), then the
-    training data, then the run folder, then the file's name (``best.pt``, ``best_int8.pt``,
-    ...; when theirs differ), added. Labels are unique: rows still alike are
+    differ), then the training data, then the run folder, then the file's name (``best.pt``,
+    ``best_int8.pt``, ...; when theirs differ), added. Labels are unique: rows still alike are
     numbered (``#2``, ...), so a report never merges two of them."""
     labels = [method_label(r) + (INT8_SUFFIX if r.get("int8") else "")
               + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]  # fmt: skip
