@@ -121,3 +121,23 @@ def test_data_without_contactor_types_are_refused_before_training(tiny_dataset, 
     with pytest.raises(ConfigError, match="carry no contactor types"):
         fit(run, plain, tmp_path / "run", progress=False)
     assert not (tmp_path / "run").exists()
+
+
+def test_fault_aware_fine_tuning_takes_a_type_head_checkpoint(typed_dataset, tiny_run,
+                                                               tmp_path):  # fmt: skip
+    """`handskin experiment fault-aware` retrains from a checkpoint's configuration; the faulty
+    copies carry no contactor types, so the head (a training aid) is left out there."""
+    from learn.experiments.fault_aware import FaultAwareScale, fault_aware_model
+    from learn.experiments.robustness_setup import Scale
+
+    run = aux_run(tiny_run, epochs=1)
+    fit(run, load_data(typed_dataset, run), tmp_path / "aux", progress=False)
+    scale = FaultAwareScale(Scale(1, None, 4, n_spots=(2,), radii_mm=(20.0,),
+                                  fractions=(0.0, 0.6)), epochs=(1, 1), n_train=(8, 8),
+                            copies=1)  # fmt: skip
+    out = fault_aware_model(tmp_path / "aux" / "best.pt", typed_dataset, tmp_path / "fa",
+                            epochs=1, n_train=8, scale=scale, seed=0, progress=False)  # fmt: skip
+    tuned = load_checkpoint(out["checkpoint"])
+    assert tuned["config"]["aux_types_weight"] == 0.0 and out["train_images"] == 16
+    plain = create_model("handsnet", **run.model.kwargs())
+    plain.load_state_dict(tuned["model"], strict=True)
