@@ -1,0 +1,53 @@
+"""docs/check_sensed_share.py re-simulates a dataset's presses exactly as the generator made
+them (checked against the stored force and class) and refuses a dataset it cannot reproduce."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from sim.gen_config import load_generate_config
+from sim.generate import generate
+from tactile.dataset import open_dataset
+
+ROOT = Path(__file__).resolve().parents[2]
+SMALL = {"part": "plate", "n": 6, "chunk_size": 3, "n_subjects": 3, "instances_per_kind": 2,
+         "duration_scale": 0.5, "seed": 11, "episode": {"max_attempts": 20}}  # fmt: skip
+
+
+def script():
+    spec = importlib.util.spec_from_file_location("check_sensed_share",
+                                                  ROOT / "docs" / "check_sensed_share.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def plate_dataset(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("sensed") / "ds"
+    generate(load_generate_config(None, **SMALL), out, workers=1, progress=False)
+    return out
+
+
+def test_resimulation_matches_the_dataset(plate_dataset):
+    hand, active, share, force = script().shares(plate_dataset, 10)  # n clipped to the 6 samples
+    ds = open_dataset(plate_dataset)
+    assert np.array_equal(hand, ds.is_hand[:].astype(bool))
+    assert np.array_equal(np.float32(force), ds["force_n"][:])
+    assert (active > 0).all() and np.isfinite(share).all() and (share >= 0).all()
+
+
+def test_a_dataset_it_cannot_reproduce_is_refused(plate_dataset, tmp_path):
+    copy = tmp_path / "ds"
+    copy.mkdir()
+    for name in ("dataset.h5", "info.json", "manifest.json"):
+        (copy / name).write_bytes((plate_dataset / name).read_bytes())
+    with h5py.File(copy / "dataset.h5", "r+") as f:
+        f["samples/force_n"][2] += 1.0
+    with pytest.raises(SystemExit, match="differ from force_n"):
+        script().shares(copy, 6)
