@@ -50,6 +50,8 @@ def shares(data: str | Path, n: int) -> tuple[np.ndarray, ...]:
                 continue
             if frames.best_active > 0:  # else rejected ("no_contact")
                 break
+        else:  # the generator would have refused this sample
+            raise SystemExit(f"{data}: sample {i} fails every attempt here: made by other code?")
         best = frames.best
         hand.append(is_hand)
         active.append(best.active)
