@@ -19,12 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.episode import EpisodeFailure, episode_rng, run_episode
+from sim.episode import select_attempt
 from sim.gen_config import GenerateConfig
 from sim.generate import is_hand_index
 from sim.sampler import build_state
 from tactile.config import from_dict
 from tactile.dataset import open_dataset
+from tactile.errors import ConfigError
 
 BINS = ((0, 10), (10, 20), (20, 40), (40, None))  # active taxels at the selected frame
 
@@ -41,18 +42,11 @@ def shares(data: str | Path, n: int) -> tuple[np.ndarray, ...]:
     for i in range(n):
         is_hand = is_hand_index(i, cfg.hand_fraction)
         make = state.hand if is_hand else state.nonhand
-        for attempt in range(cfg.episode.max_attempts):  # as `sim.episode.run_sample`
-            rng, _ = episode_rng(cfg.seed, i, attempt)
-            spec, plan = make(rng)
-            try:
-                frames = run_episode(state.ctx, spec, plan, rng)
-            except EpisodeFailure:
-                continue
-            if frames.best_active > 0:  # else rejected ("no_contact")
-                break
-        else:  # the generator would have refused this sample
-            raise SystemExit(f"{data}: sample {i} fails every attempt here: made by other code?")
-        best = frames.best
+        try:  # the attempt the generator kept: same draws, same checks
+            best = select_attempt(i, cfg.seed, state.ctx, make).frames.best
+        except ConfigError as err:  # the generator would have refused this sample
+            msg = f"{data}: sample {i} fails here ({err}): made by other code?"
+            raise SystemExit(msg) from None
         hand.append(is_hand)
         active.append(best.active)
         share.append(best.sensed_force_n / max(best.force_n, 1e-12))

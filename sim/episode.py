@@ -45,7 +45,7 @@ from sim.skin import SkinConfig, SkinInstance
 from tactile.errors import ConfigError
 from tactile.tactile_map import TactileMap
 
-REASONS = ("warning", "nan", "too_deep", "no_contact")
+REASONS = ("warning", "nan", "too_deep", "no_contact", "few_taxels")
 FRAME_DT_S = 0.1  # s: the skin is sampled at 10 Hz (Albini & Cannata 2020)
 CONTROL_DT_S = 0.01  # s: the schedule's targets are updated at 100 Hz
 SENSOR_BIT = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
@@ -64,6 +64,10 @@ class EpisodeConfig:
     skin_seed: int = 0  # draws of the one physical skin (gain, baseline, drift) of a dataset
     active_pa: float = 500.0  # a taxel is active above this noise-free pressure (~3 noise sd), Pa
     max_attempts: int = 8  # episodes tried per sample before giving up
+    # Count: an episode whose selected frame has fewer active taxels is rejected ("few_taxels")
+    # and retried, as a recording protocol that keeps only contacts of at least this size would;
+    # 1 keeps every contact (docs/generate.md "Small contacts" gives the measured effect).
+    min_active_taxels: int = 1
     cache_size: int = 16  # compiled press scenes kept per worker
     skip_release: bool = True  # stop after hold unless the sequence is kept (the frame is
     # selected among load and hold frames either way; release frames only shrink the contact)
@@ -209,30 +213,58 @@ def frame_rng(ep_seed: int, frame: Frame) -> np.random.Generator:
 Maker = Callable[[np.random.Generator], tuple[ContactorSpec, PressPlan]]
 
 
-def run_sample(
-    index: int, seed: int, ctx: EpisodeContext, make: Maker, keep_sequence: bool = False
-) -> tuple[dict, Counter]:
-    """Sample ``index`` of a dataset seeded ``seed``: (sample dict, reject counts by reason).
+@dataclass(frozen=True)
+class Attempt:
+    """The kept attempt of a sample: what was pressed, its frames and its episode seed."""
 
-    ``make(rng)`` draws the contactor and plan of an attempt. Failed attempts are retried with
-    `episode_rng(seed, index, attempt)`; ConfigError after `max_attempts` failures.
+    contactor: ContactorSpec
+    plan: PressPlan
+    frames: Frames
+    ep_seed: int  # uint64 episode seed (`episode_rng`): the read noise of its frames
+    rejects: Counter  # failed attempts before it, by reason (`REASONS`)
+
+
+def select_attempt(
+    index: int, seed: int, ctx: EpisodeContext, make: Maker, keep_release: bool = False
+) -> Attempt:
+    """The first attempt of sample ``index`` (dataset seed ``seed``) that passes the checks.
+
+    ``make(rng)`` draws the contactor and plan of an attempt. An attempt fails when its episode
+    is unstable (`_check`), presses no taxel ("no_contact") or fewer than
+    ``ctx.cfg.min_active_taxels`` at its selected frame ("few_taxels"); it is then retried with
+    `episode_rng(seed, index, attempt + 1)`. ConfigError after ``max_attempts`` failures.
     """
     rejects: Counter = Counter()
     for attempt in range(ctx.cfg.max_attempts):
         rng, ep_seed = episode_rng(seed, index, attempt)
         contactor, plan = make(rng)
         try:
-            frames = run_episode(ctx, contactor, plan, rng, keep_release=keep_sequence)
+            frames = run_episode(ctx, contactor, plan, rng, keep_release=keep_release)
             if frames.best_active == 0:
                 raise EpisodeFailure("no_contact", "no active taxel in any frame")
+            if frames.best_active < ctx.cfg.min_active_taxels:
+                raise EpisodeFailure("few_taxels", f"{frames.best_active} active taxels < "
+                                     f"min_active_taxels = {ctx.cfg.min_active_taxels}")
         except EpisodeFailure as failure:
             rejects[failure.reason] += 1
             continue
-        return make_sample(ctx, contactor, plan, frames, ep_seed, keep_sequence), rejects
+        return Attempt(contactor, plan, frames, ep_seed, rejects)
+    fix = ("lower episode.min_active_taxels or raise episode.max_attempts"
+           if rejects["few_taxels"] else
+           "check the contactor's force and max_penetration_m, or raise max_attempts")
     raise ConfigError(
         f"sample {index} (seed {seed}) failed {ctx.cfg.max_attempts} attempts: {dict(rejects)}. "
-        "Fix: check the contactor's force and max_penetration_m, or raise max_attempts"
+        f"Fix: {fix}"
     )
+
+
+def run_sample(
+    index: int, seed: int, ctx: EpisodeContext, make: Maker, keep_sequence: bool = False
+) -> tuple[dict, Counter]:
+    """Sample ``index`` of a dataset seeded ``seed``: (sample dict, reject counts by reason),
+    from the attempt `select_attempt` keeps."""
+    a = select_attempt(index, seed, ctx, make, keep_release=keep_sequence)
+    return make_sample(ctx, a.contactor, a.plan, a.frames, a.ep_seed, keep_sequence), a.rejects
 
 
 def reading(ctx: EpisodeContext, frame: Frame, ep_seed: int) -> np.ndarray:

@@ -41,6 +41,7 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "episode.skin_seed": (0, 2**63 - 1),
     "episode.active_pa": (0.0, 1e6),
     "episode.max_attempts": (1, 100),
+    "episode.min_active_taxels": (1, 100_000),
     "episode.cache_size": (1, 1024),
 }
 

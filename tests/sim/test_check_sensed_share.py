@@ -51,3 +51,14 @@ def test_a_dataset_it_cannot_reproduce_is_refused(plate_dataset, tmp_path):
         f["samples/force_n"][2] += 1.0
     with pytest.raises(SystemExit, match="differ from force_n"):
         script().shares(copy, 6)
+
+
+def test_a_dataset_with_a_size_filter_is_reproduced(tmp_path):
+    """The redrawn attempts of `episode.min_active_taxels` are followed: every force matches."""
+    out = tmp_path / "ds"
+    cfg = SMALL | {"episode": {"max_attempts": 40, "min_active_taxels": 25}}
+    generate(load_generate_config(None, **cfg), out, workers=1, progress=False)
+    assert open_dataset(out).attrs["rejects"]["few_taxels"] > 0
+    _, active, _, force = script().shares(out, 6)
+    assert (active >= 25).all()
+    assert np.array_equal(np.float32(force), open_dataset(out)["force_n"][:])

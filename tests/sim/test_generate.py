@@ -246,3 +246,30 @@ def test_folder_started_by_other_code_is_refused_with_the_reason(tmp_path: Path)
     (tmp_path / "manifest.json").write_text(json.dumps(old))
     with pytest.raises(DataError, match="started by other generator code"):
         refuse_other_code(tmp_path, make_manifest(cfg, "plate", generator_version(), cfg.seed))
+
+
+def test_min_active_taxels_replaces_only_the_small_prints(reference: Path, tmp_path: Path) -> None:
+    """A sample of the unfiltered run with >= M active taxels passed every check the filtered run
+    makes at the same attempt, so it is kept byte for byte; the others are redrawn to >= M."""
+    ref = open_dataset(reference)
+    threshold = ref.attrs["config"]["episode"]["active_pa"]
+    active = (ref.pressure_pa[:] > threshold).sum(axis=1)
+    m = int(np.median(active))  # about half the prints are below it
+    assert 1 < m and (active < m).any()
+    out = tmp_path / "ds"
+    generate(small(episode={"max_attempts": 40, "min_active_taxels": m}), out, workers=1,
+             progress=False)  # fmt: skip
+    ds = open_dataset(out)
+    assert ((ds.pressure_pa[:] > threshold).sum(axis=1) >= m).all()
+    raw_ref, raw = ref.raw[:], ds.raw[:]
+    for i in range(len(active)):
+        same = np.array_equal(raw_ref[i], raw[i])
+        assert same == (active[i] >= m), f"sample {i}: {active[i]} active taxels, m = {m}"
+    assert ds.attrs["rejects"]["few_taxels"] >= int((active < m).sum())
+
+
+def test_min_active_taxels_out_of_range_is_refused() -> None:
+    with pytest.raises(ConfigError, match=r"episode.min_active_taxels = 0 is out of range"):
+        small(episode={"min_active_taxels": 0})
+    with pytest.raises(ConfigError, match=r"min_active_taxels: expected int"):
+        small(episode={"min_active_taxels": 2.5})
