@@ -273,3 +273,10 @@ def test_min_active_taxels_out_of_range_is_refused() -> None:
         small(episode={"min_active_taxels": 0})
     with pytest.raises(ConfigError, match=r"min_active_taxels: expected int"):
         small(episode={"min_active_taxels": 2.5})
+
+
+@pytest.mark.parametrize("name", ["generate_example", "generate_diverse", "generate_min_taxels"])
+def test_the_documented_configuration_files_load(name: str) -> None:
+    cfg = load_generate_config(ROOT / "docs" / f"{name}.toml")
+    if name == "generate_min_taxels":
+        assert (cfg.episode.min_active_taxels, cfg.episode.max_attempts) == (20, 40)
