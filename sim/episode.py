@@ -87,6 +87,12 @@ class EpisodeContext:
     def __init__(self, cfg: EpisodeConfig | None = None, part: Part | None = None) -> None:
         self.cfg = cfg or EpisodeConfig()
         self.part = part or get_part(self.cfg.part)
+        n_taxels = len(self.part.layout.positions_m)
+        if self.cfg.min_active_taxels > n_taxels:
+            raise ConfigError(
+                f"episode.min_active_taxels = {self.cfg.min_active_taxels} is more than the "
+                f"{n_taxels} taxels of part {self.cfg.part!r}; lower it"
+            )
         self.tmap = TactileMap.build(self.part.layout)
         rng = np.random.default_rng(np.random.SeedSequence(self.cfg.skin_seed, spawn_key=(2**31,)))
         self.skin = SkinInstance.create(

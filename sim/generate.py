@@ -178,8 +178,8 @@ def generate(
 
     out = Path(out)
     t0 = time.perf_counter()
+    ctx = EpisodeContext(cfg.episode, part=build_part(cfg))  # checks the part's taxel count
     _claim(cfg, out, workers)
-    ctx = EpisodeContext(cfg.episode, part=build_part(cfg))
     writer = open_writer(cfg, out, ctx)
     mine = shard_chunks(cfg.n_chunks, shard)
     done = set(writer.complete_chunks())

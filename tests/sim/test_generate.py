@@ -280,3 +280,15 @@ def test_the_documented_configuration_files_load(name: str) -> None:
     cfg = load_generate_config(ROOT / "docs" / f"{name}.toml")
     if name == "generate_min_taxels":
         assert (cfg.episode.min_active_taxels, cfg.episode.max_attempts) == (20, 40)
+
+
+def test_a_size_floor_above_the_part_s_taxel_count_is_refused_before_any_work(tmp_path):
+    from sim.parts import get_part
+
+    n_taxels = len(get_part("plate").layout.positions_m)
+    out = tmp_path / "ds"
+    with pytest.raises(ConfigError, match=rf"min_active_taxels = {n_taxels + 1} is more than "
+                                          rf"the {n_taxels} taxels of part 'plate'"):
+        generate(small(episode={"min_active_taxels": n_taxels + 1}), out, workers=1,
+                 progress=False)  # fmt: skip
+    assert not out.exists()
