@@ -83,11 +83,16 @@ def test_members_that_cannot_share_an_input_are_refused(checkpoints, fcn, tmp_pa
         load_members([checkpoints["segnet"], other])
 
 
-def test_evaluate_ensemble_matches_a_numpy_reference(checkpoints, fcn, tiny_dataset):
+def test_evaluate_ensemble_matches_a_numpy_reference(checkpoints, tiny_dataset, tmp_path):
     """The ensemble row's confusion matrix is the one of argmax(mean softmax), unpressed pixels
-    background, counted here with numpy; with flips, the mean runs over members and views."""
-    paths = [checkpoints["segnet"], fcn]
-    _, run = model_from_checkpoint(load_checkpoint(fcn))
+    background, counted here with numpy; with flips, the mean runs over members and views.
+
+    The members are the briefly trained SegNet and a copy with seeded noise on its weights: two
+    networks of like confidence, so the mean sides with each on many pixels (about 1,000-3,400
+    of 5,492 on an AMD EPYC). With the 2-epoch FCN-16s as the second member the mean equalled
+    the FCN alone on every pixel there, and the check could not tell the mean from it."""
+    paths = [checkpoints["segnet"], reseeded(checkpoints["segnet"], tmp_path, 1)]
+    _, run = model_from_checkpoint(load_checkpoint(paths[0]))
     test = materialize(open_split(tiny_dataset, "test", "segment", run.model.input_size, None,
                                   run.train.seed), "test", False)  # fmt: skip
     differs = dict.fromkeys(paths, False)
@@ -103,12 +108,10 @@ def test_evaluate_ensemble_matches_a_numpy_reference(checkpoints, fcn, tiny_data
             one[test.x[:, 0].numpy() == 0] = 0
             differs[alone] = differs[alone] or bool((one != pred).any())
         assert row["arch"] == "ensemble" and [m["arch"] for m in row["members"]] == [
-            "segnet", "fcn16s"]
+            "segnet", "segnet"]
         assert row["tta_views"] == ([0, 1, 2] if tta else None)
         assert row["ms_per_image"]["fast"] > 0
-    # The check can tell the mean from either network alone, with or without flips (how often
-    # each does depends on the machine's float kernels, through the two briefly trained nets).
-    assert all(differs.values())
+    assert all(differs.values())  # the check can tell the mean from either network alone
 
 
 def test_cli_evaluate_and_predict_with_an_ensemble(checkpoints, fcn, tiny_dataset, tmp_path):
