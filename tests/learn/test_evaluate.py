@@ -75,8 +75,30 @@ def test_fast_inference_keeps_predictions(arch):
         agree = (fast(x).argmax(1) == model(x).argmax(1)).double().mean()
     assert agree >= (1.0 if arch == "handsnet" else 0.999)
     assert fast.num_classes == model.num_classes and fast.task == model.task
-    strict = fast_inference(model, bf16=True, min_agreement=1.01)  # impossible: float path
+    strict = fast_inference(model, bf16=True, max_change=-1.0)  # impossible: float path
     assert not strict.bf16
+
+
+def test_bf16_is_kept_by_the_largest_probability_change():
+    """bf16 stays iff no softmax probability on the check images moves by more than
+    ``max_change`` from the unprepared float model's (the test's own reference), near ties
+    included."""
+    torch.manual_seed(0)
+    model = create_model("handsnet", input_size=(32, 48)).eval()
+    x = torch.rand(8, 1, 32, 48)
+    with torch.no_grad():  # make image 0 a near tie: its two logits 1e-4 apart
+        logits = model(x)
+        model.classifier[-1].bias += torch.tensor([0.0, float(logits[0, 0] - logits[0, 1]) + 1e-4])
+        ref = model(x).softmax(1)
+    assert abs(float(ref[0, 1] - ref[0, 0])) < 1e-3
+    bf16 = fast_inference(model, bf16=True, check=x, max_change=1.0)
+    assert bf16.bf16
+    with torch.no_grad():
+        change = float((bf16(x).softmax(1) - ref).abs().max())
+    assert 0 < change < 0.05  # bf16 rounds, a little
+    assert fast_inference(model, bf16=True, check=x, max_change=2 * change).bf16
+    assert not fast_inference(model, bf16=True, check=x, max_change=change / 2).bf16
+    assert fast_inference(model, bf16=True, check=x).bf16  # the default bound, 0.05
 
 
 def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
