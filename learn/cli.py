@@ -31,7 +31,7 @@ def _hand_classes(text: str | None) -> tuple[str, ...] | None:
 
 
 # overrides of RunConfig itself, not of its train table
-RUN_KEYS = ("val_fraction", "precision", "device")
+RUN_KEYS = ("val_fraction", "precision", "device", "distill_from")
 
 
 def resolve_run(arch: str, config: Path | None, overrides: dict, test_c: bool):
@@ -121,6 +121,10 @@ HandOpt = _opt(str | None, "Image folders: comma-separated folder names that are
                "(e.g. hand,finger); default: every folder its own class.")
 InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file); vgg_svm: the vgg16 "
                "checkpoint whose features feed the SVM.")
+DistillOpt = _opt(Path | None, "Distil from this trained classifier (.pt file, e.g. a vgg16 "
+                  "best.pt of the same data): the network also learns its flip-averaged "
+                  "probabilities (distill_weight, dimensionless share of the loss, and "
+                  "distill_temperature, dimensionless, in a run TOML).")
 TestCOpt = _opt(bool, "The paper's Test C schedule: lr 0.01 halved at epoch 60 of 120, batch 128 "
                 "images, lr x 0.1 on the first two convolutions.")
 CanvasOpt = _opt(str | None, "Input canvas 'H,W' in mm (e.g. 229,383, the forearm map): each "
@@ -150,6 +154,7 @@ def train_command(
     device: DeviceOpt = None,
     hand_classes: HandOpt = None,
     init: InitOpt = None,
+    distill_from: DistillOpt = None,
     test_c: TestCOpt = False,
     canvas_mm: CanvasOpt = None,
     resume: ResumeOpt = False,
@@ -167,7 +172,7 @@ def train_command(
         if arch in CLASSICAL:
             unused = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction,
                       "--precision": precision, "--device": device,
-                      "--test-c": test_c or None,
+                      "--test-c": test_c or None, "--distill-from": distill_from,
                       "--resume": resume or None, "--cv-grid": cv_grid,
                       "--stop-after-epoch": stop_after_epoch,
                       "--canvas-mm": canvas_mm}  # fmt: skip
@@ -176,7 +181,8 @@ def train_command(
             return
         over = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "seed": seed,
                 "val_fraction": val_fraction, "precision": precision,
-                "device": device}  # fmt: skip
+                "device": device,
+                "distill_from": None if distill_from is None else str(distill_from)}  # fmt: skip
         run = resolve_run(arch, config, over, test_c)
         if canvas_mm is not None:
             model = dataclasses.replace(run.model, canvas_mm=parse_canvas(canvas_mm))
@@ -195,6 +201,14 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
     from tactile.config import to_dict
 
     check_precision(run)
+    if run.distill_from:
+        from learn.distill import check_teacher
+
+        if cv_grid:
+            raise ConfigError("--distill-from with --cv-grid: the teacher trained on every fold's "
+                              "validation people, so the folds would not be held out. Fix: "
+                              "cross-validate without the teacher, then distil the pick")
+        check_teacher(run, data)
     if cv_grid and stop is not None:
         raise ConfigError("--stop-after-epoch with --cv-grid: the grid's pick would be lost on "
                           "--resume. Fix: cross-validate first, then train the pick in parts")

@@ -60,7 +60,11 @@ def _init_text(r: dict) -> str:
             else " Initialisation: random (seeded)." if init == "random"
             else f" Initialisation: the weights of `{init}`.")  # fmt: skip
     bf16 = trained_precision(r) == "bf16"
-    return text + (" Trained in bfloat16 (autocast forward pass)." if bf16 else "")
+    cfg = r.get("config") or {}
+    teacher = (f" Distilled from `{cfg['distill_from']}` (share {cfg.get('distill_weight'):g} of "
+               f"the loss, temperature {cfg.get('distill_temperature'):g})."
+               if cfg.get("distill_from") else "")  # fmt: skip
+    return text + (" Trained in bfloat16 (autocast forward pass)." if bf16 else "") + teacher
 
 
 def _ours(rows: list[dict], task: str) -> dict[str, dict]:

@@ -44,16 +44,17 @@ INT8_SUFFIX = " int8"
 def row_labels(rows: list[dict]) -> list[str]:
     """Table labels of report rows: the method's name (``ARCH_LABEL``, then `INT8_SUFFIX` for an
     int8 network and `TTA_SUFFIX` for test-time flips); where two rows would share a label, the
-    input size, then the width multiplier, the initialisation, the training epochs, the
-    optimizer and weight decay, the training precision, the training views (and mixup), the
-    weight averaging, the label smoothing, the contactor-type head, the seed (each when theirs
-    differ), then the training data, then the run folder, then the file's name (``best.pt``,
-    ``best_int8.pt``, ...; when theirs differ), added. Labels are unique: rows still alike are
-    numbered (``#2``, ...), so a report never merges two of them."""
+    input size, then the width multiplier, HandsNet's dropout, the initialisation, the training
+    epochs, the optimizer and weight decay, the training precision, the training views (and
+    mixup), the weight averaging, the label smoothing, the contactor-type head, the teacher, the
+    seed (each when theirs differ), then the training data, then the run folder, then the
+    file's name (``best.pt``, ``best_int8.pt``, ...; when theirs differ), added. Labels are
+    unique: rows still alike are numbered (``#2``, ...), so a report never merges two of them."""
     labels = [method_label(r) + (INT8_SUFFIX if r.get("int8") else "")
               + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]  # fmt: skip
     for extra, only_if_differs in ((size_label, True),
                                    (lambda r: width_label(r) or "default width", True),
+                                   (dropout_label, True),
                                    (init_label, True),
                                    (epochs_label, True),
                                    (optimizer_label, True),
@@ -62,6 +63,7 @@ def row_labels(rows: list[dict]) -> list[str]:
                                    (averaging_label, True),
                                    (smoothing_label, True),
                                    (types_label, True),
+                                   (teacher_label, True),
                                    (lambda r: f"seed {r.get('seed')}", True),
                                    (data_name, False),
                                    (lambda r: Path(r["checkpoint"]).parent.name, False),
@@ -170,6 +172,18 @@ def types_label(r: dict) -> str:
     return f"type head {weight:g}" if weight else "no type head"
 
 
+def teacher_label(r: dict) -> str:
+    """``distilled from <teacher's run folder> (a <weight>, T <temperature>)`` or ``no
+    teacher``: a report row's knowledge distillation (`learn.train.RunConfig.distill_from`;
+    checkpoints from before it existed: none)."""
+    cfg = r.get("config") or {}
+    if not cfg.get("distill_from"):
+        return "no teacher"
+    teacher = Path(str(cfg["distill_from"]))
+    return (f"distilled from {teacher.parent.name or teacher.name} (a "
+            f"{cfg.get('distill_weight', 0.5):g}, T {cfg.get('distill_temperature', 4.0):g})")
+
+
 def init_label(r: dict) -> str:
     """``from scratch`` (seeded random weights), ``from <run folder>`` (fine-tuned from that
     run's checkpoint, ``handskin train --init``) or ``init unknown`` (not recorded)."""
@@ -177,6 +191,13 @@ def init_label(r: dict) -> str:
     if init is None:
         return "init unknown"
     return "from scratch" if init == "random" else f"from {Path(str(init)).parent.name or init}"
+
+
+def dropout_label(r: dict) -> str:
+    """``dropout x <scale>`` or ``paper's dropout``: a report row's factor on HandsNet's dropout
+    rates (`learn.config.ModelConfig.dropout_scale`; checkpoints from before it existed: 1)."""
+    k = ((r.get("config") or {}).get("model") or {}).get("dropout_scale", 1.0)
+    return "paper's dropout" if k == 1 else f"dropout x {k:g}"
 
 
 def width_label(r: dict) -> str | None:

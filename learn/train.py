@@ -10,7 +10,8 @@ seeded permutation of the ``3 S`` (sample, view) pairs — the paper's threefold
 original, horizontal flip, vertical flip; ``rot180`` adds both flips, a 180-degree turn, as a
 fourth view — and ``get_batch`` gathers and flips them (``shift_px`` then moves each at random,
 `learn.augment`; ``mixup_alpha`` mixes a classifier's batch with itself; ``aux_types_weight``
-adds a contactor-type loss, `learn.aux_types`). Epoch ``e``
+adds a contactor-type loss, `learn.aux_types`; ``distill_from`` a trained teacher's soft targets,
+`learn.distill`). Epoch ``e``
 reseeds torch from ``(seed, e)``, so a resumed run equals an uninterrupted one on CPU.
 """
 
@@ -38,6 +39,7 @@ from learn.checkpoint import (
     save_checkpoint,
 )
 from learn.device import check_device
+from learn.distill import Distiller, make_distiller
 from learn.evaluate import evaluate_tensors, plot_history
 from learn.fastpath import bf16_supported
 from learn.finetune import load_weights, make_optimizer, make_scheduler
@@ -112,10 +114,10 @@ def make_loss(run: RunConfig, train: TensorData, validation: bool = False) -> nn
 
 
 def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool,
-                head: TypeHead | None = None):  # fmt: skip
+                head: TypeHead | None = None, distiller: Distiller | None = None):  # fmt: skip
     """One epoch over a seeded permutation of (sample, view) pairs; returns the mean loss (with
-    the type head's term when there is one). Batches are drawn and augmented on the CPU, then
-    moved to ``run.device``."""
+    the type head's term, and the teacher's with a ``distiller``, `learn.distill`). Batches are
+    drawn and augmented on the CPU, then moved to ``run.device``."""
     torch.manual_seed(epoch_seed(run.train.seed, epoch))
     views = views_of(run)
     order = torch.randperm(len(data.y) * len(views))
@@ -129,7 +131,8 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
         x, y = mixup(x, y, run.mixup_alpha, run.model.num_classes)
         x, y = x.to(run.device), y.to(run.device)
         aux = None if head is None else (head, data.types[items // len(views)].to(run.device))
-        value = train_step(model, loss_fn, optimizer, x, y, run.task, run.precision, aux)
+        soft = None if distiller is None else (distiller, items // len(views))
+        value = train_step(model, loss_fn, optimizer, x, y, run.task, run.precision, aux, soft)
         total += value * len(y)
         bar.set_postfix(loss=f"{value:.4f}")
     return total / len(order)
@@ -137,9 +140,12 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
 
 def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task: str,
                precision: str = "fp32",
-               aux: tuple[TypeHead, torch.Tensor] | None = None) -> float:  # fmt: skip
+               aux: tuple[TypeHead, torch.Tensor] | None = None,
+               distill: tuple[Distiller, torch.Tensor] | None = None) -> float:  # fmt: skip
     """One optimisation step on images ``x`` (B, 1, h, w) and targets ``y``; returns the loss.
     ``aux``: a type head and the batch's type ids (B,), whose weighted loss is added.
+    ``distill``: a `learn.distill.Distiller` and the batch's training-sample indices (B,); the
+    loss becomes its mix of the labels' loss and the teacher's soft targets.
 
     Classifiers get channels-last input (their weights are channels-last, see :func:`build`).
     ``precision="bf16"`` runs the forward pass under bfloat16 autocast (`RunConfig.precision`)
@@ -155,6 +161,8 @@ def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task
                 out = model(x)
             type_logits = aux[0]()
     loss = loss_fn(out.float(), y)
+    if distill is not None:
+        loss = distill[0].loss(loss, out.float(), distill[1])
     if aux is not None:
         loss = loss + aux[0].loss(type_logits, aux[1])
     optimizer.zero_grad(set_to_none=True)
@@ -274,6 +282,7 @@ def fit(
     loss_fn = make_loss(run, data.train).to(run.device)
     val_loss_fn = (make_loss(run, data.train, validation=True).to(run.device)
                    if run.train.label_smoothing else loss_fn)  # fmt: skip
+    distiller = make_distiller(run, data, progress)
     start, best, history, best_state = 0, float("nan"), [], _state(scored)
     if resume and out is not None and (out / LAST).is_file():
         start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler,
@@ -288,7 +297,7 @@ def fit(
         if on_epoch is not None:
             on_epoch(epoch, optimizer)
         row = _one_epoch(model, data, (loss_fn, val_loss_fn), optimizer, run, epoch, progress,
-                         scored, head)  # fmt: skip
+                         scored, head, distiller)  # fmt: skip
         scheduler.step()
         history.append(row)
         if _improved(row.get("val_metric", float("nan")), best) or data.val is None:
@@ -339,7 +348,8 @@ def _check_stop(stop_after_epoch: int | None, start: int, epochs: int, last: Pat
 
 @flushing()
 def _one_epoch(model, data: Data, loss_fns, optimizer, run: RunConfig, epoch: int, progress: bool,
-               scored: nn.Module | None = None, head: TypeHead | None = None):  # fmt: skip
+               scored: nn.Module | None = None, head: TypeHead | None = None,
+               distiller: Distiller | None = None):  # fmt: skip
     """Train one epoch and validate ``scored`` (default ``model``; the weight average when there
     is one): a history row (losses, val metric, lr of each group). ``loss_fns``: (training,
     validation) losses."""
@@ -347,7 +357,7 @@ def _one_epoch(model, data: Data, loss_fns, optimizer, run: RunConfig, epoch: in
     tic = time.perf_counter()
     row = {"epoch": epoch + 1, "lr": [g["lr"] for g in optimizer.param_groups]}
     row["train_loss"] = train_epoch(model, data.train, loss_fn, optimizer, run, epoch, progress,
-                                    head)  # fmt: skip
+                                    head, distiller)  # fmt: skip
     if data.val is not None:
         res = evaluate_tensors(model if scored is None else scored, data.val,
                                run.model.num_classes, run.eval_batch_size, val_loss_fn)

@@ -77,10 +77,11 @@ def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int
         (out / RECIPE).write_text(json.dumps(recipe, indent=1))
     run = run_from_dict(load_checkpoint(plain)["config"])
     run = replace_train(run, epochs=epochs, lr=run.train.lr * scale.lr_factor, seed=seed)
-    # no type head: it is a training aid of the plain run (`learn.aux_types`), and the faulty
-    # copies carry no contactor types; the fine-tuned network is the same plain network
+    # no type head and no teacher: both are training aids of the plain run (`learn.aux_types`,
+    # `learn.distill`), and the faulty copies carry no contactor types; the fine-tuned network
+    # is the same plain network
     run = dataclasses.replace(run, flips=False, device=scale.eval.plan.device,
-                              aux_types_weight=0.0)  # fmt: skip
+                              aux_types_weight=0.0, distill_from="")  # fmt: skip
     made: list = []  # the augmented data, when this call trains
 
     def make_data():

@@ -119,6 +119,29 @@ def test_handsnet_zero_init_output_starts_every_image_at_even_odds():
                if n.endswith("weight") and not n.startswith("classifier.7"))  # fmt: skip
 
 
+def test_handsnet_dropout_scale_multiplies_the_papers_rates_and_keeps_the_layers():
+    from learn.config import ModelConfig
+
+    paper = HandsNet()
+    for k in (0.0, 0.5):
+        model = create_model("handsnet", **ModelConfig("handsnet", dropout_scale=k).kwargs())
+        drops = [m.p for m in model.modules() if isinstance(m, nn.Dropout)]
+        assert drops == pytest.approx([0.1 * k, 0.2 * k, 0.6 * k, 0.5 * k])
+        assert [(n, t.shape) for n, t in model.state_dict().items()] == [
+            (n, t.shape) for n, t in paper.state_dict().items()]  # one checkpoint format
+    # with no dropout, a training-mode pass with batch norm frozen draws nothing: it equals eval
+    model = HandsNet(dropout_scale=0.0).eval()
+    for m in model.modules():
+        m.train(isinstance(m, nn.Dropout))
+    x = torch.rand(3, 1, 68, 100)
+    torch.testing.assert_close(model(x), model.eval()(x))
+    for bad, arch in ((1 / 0.6, "handsnet"), (-0.1, "handsnet"), (0.5, "vgg16")):
+        with pytest.raises(ConfigError, match="dropout_scale"):
+            ModelConfig(arch, dropout_scale=bad)
+    with pytest.raises(ConfigError, match="dropout_scale"):
+        HandsNet(dropout_scale=2.0)
+
+
 def test_vgg16_layout_at_full_width():
     encoder = VGGEncoder(width=1.0)
     convs = [m for m in encoder.modules() if isinstance(m, nn.Conv2d)]

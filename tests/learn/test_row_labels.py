@@ -78,6 +78,20 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
     assert row_labels([*hn, *typed]) == [
         "HandsNet, no type head, seed 0", "HandsNet, no type head, seed 1",
         "HandsNet, type head 1, seed 0", "HandsNet, type head 1, seed 1"]
+    # ... or distilled from a teacher (none recorded: none), seed by seed
+    taught = dict(hn[0], config={**long["config"], "distill_from": "/r/vgg_x10/best.pt",
+                                 "distill_weight": 0.5, "distill_temperature": 4.0},
+                  checkpoint="/r/kd/best.pt")  # fmt: skip
+    assert row_labels([*hn, taught]) == [
+        "HandsNet, no teacher, seed 0", "HandsNet, no teacher, seed 1",
+        "HandsNet, distilled from vgg_x10 (a 0.5, T 4)"]
+    # ... or with HandsNet's dropout scaled (none recorded: the paper's)
+    model = {**long["config"].get("model", {}), "dropout_scale": 0.0}
+    nodrop = dict(hn[0], config={**long["config"], "model": model},
+                  checkpoint="/r/nd/best.pt")  # fmt: skip
+    assert row_labels([*hn, nodrop]) == [
+        "HandsNet, paper's dropout, seed 0", "HandsNet, paper's dropout, seed 1",
+        "HandsNet, dropout x 0"]
     # fine-tuned from another run's checkpoint: its run folder, before the epochs (none
     # recorded: said only where it differs)
     scratch = [dict(long, init="random", train_data={"path": f"/d/{d}", "n_train": 9})
@@ -90,6 +104,9 @@ def test_report_labels_widths_and_puts_test_time_flips_after_their_row():
                                                           "SegNet, from seg_x2_k"]  # fmt: skip
     assert "bfloat16" in _init_text(dict(bf16, init="random"))
     assert "bfloat16" not in _init_text(dict(long, init="random"))
+    assert "Distilled from `/r/vgg_x10/best.pt` (share 0.5 of the loss, temperature 4)." in (
+        _init_text(dict(taught, init="random")))
+    assert "Distilled" not in _init_text(dict(long, init="random"))
     # ensembles: a repeated method is counted, and seed replicates name their seeds
     ens = {"arch": "ensemble", "checkpoint": "/r/a.pt + /r/b.pt + /r/c.pt",
            "members": [{"arch": "handsnet", "seed": k} for k in (0, 1, 2)]}
