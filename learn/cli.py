@@ -197,10 +197,12 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
     from learn.checkpoint import check_no_overwrite, versions
     from learn.crossval import cross_validate, cv_markdown, parse_grid
     from learn.evaluate import evaluate_tensors
-    from learn.train import check_precision, check_stop, fit, load_data
+    from learn.run_state import check_stop
+    from learn.train import check_precision, fit, load_data
     from tactile.config import to_dict
 
     check_precision(run)
+    teacher = None
     if run.distill_from:
         from learn.distill import check_teacher
 
@@ -208,7 +210,7 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
             raise ConfigError("--distill-from with --cv-grid: the teacher trained on every fold's "
                               "validation people, so the folds would not be held out. Fix: "
                               "cross-validate without the teacher, then distil the pick")
-        check_teacher(run, data)
+        teacher = check_teacher(run, data)
     if cv_grid and stop is not None:
         raise ConfigError("--stop-after-epoch with --cv-grid: the grid's pick would be lost on "
                           "--resume. Fix: cross-validate first, then train the pick in parts")
@@ -222,9 +224,11 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
         typer.echo(cv_markdown(cv))
         run = cv.best_run
     loaded = load_data(data, run, hand_classes=hand, progress=progress)
-    run = _fit_classes(run, loaded)
+    fitted = _fit_classes(run, loaded)
+    teacher = teacher if fitted is run else None  # classes changed: fit checks the teacher again
+    run = fitted
     result = fit(run, loaded, out, resume=resume, init_from=init, progress=progress,
-                 stop_after_epoch=stop)  # fmt: skip
+                 stop_after_epoch=stop, teacher=teacher)  # fmt: skip
     if result.paused:
         typer.echo(f"stopped after epoch {stop} of {run.train.epochs} (run in {out}); continue "
                    "with the same command and --resume, without --stop-after-epoch to finish")
@@ -289,34 +293,18 @@ def evaluate_command(
     time_rounds: TimeRoundsOpt = 3,
 ) -> None:
     """Metrics, confusion matrices (% of true class) and CPU ms/image next to the paper."""
-    from learn.checkpoint import load_checkpoint, versions
-    from learn.classical import load_npz
+    from learn.checkpoint import versions
     from learn.error_sheets import save_error_sheets
+    from learn.eval_jobs import eval_jobs
     from learn.eval_report import report_json, write_report
-    from learn.evaluate import evaluate_checkpoint, evaluate_ensemble, tta_views
+    from learn.evaluate import evaluate_checkpoint, evaluate_ensemble
     from learn.fastpath import check_timing
-    from learn.train import run_from_dict
 
     try:
         check_timing(time_runs, time_rounds, threads)
         _check_data(data)
         _refuse_repeats(checkpoints)
-        jobs = []  # (checkpoint or list of them, with test-time flips, as int8)
-        by_task: dict[str, list[Path]] = {}
-        loaded = {}  # each .pt file, read once
-        for c in checkpoints:
-            if c.suffix == ".npz":
-                load_npz(c)
-                jobs.append((c, False, False))
-                continue
-            loaded[c] = load_checkpoint(c)
-            run = run_from_dict(loaded[c]["config"])
-            if tta:  # a network trained without flips fails here, before any work
-                tta_views(run, c)
-            by_task.setdefault(run.task, []).append(c)
-            jobs += [(c, False, False)] + ([(c, True, False)] if tta else [])
-        jobs += _ensemble_jobs(by_task, tta) if ensemble else []
-        jobs += _int8_jobs(loaded) if int8 else []
+        jobs = eval_jobs(checkpoints, tta, ensemble, int8)
         hand = _hand_classes(hand_classes)
         timing = {"threads": threads, "time_runs": time_runs}
         rows = [evaluate_ensemble(c, data, hand_classes=hand, tta=t, compiled=compiled,
@@ -340,37 +328,6 @@ def evaluate_command(
     write_report(rows, report, header)
     report.with_suffix(".json").write_text(report_json(rows))
     typer.echo(f"report written to {report}")
-
-
-def _int8_jobs(ckpts: dict[Path, dict]) -> list[tuple[Path, bool, bool]]:
-    """``--int8``'s jobs: every float HandsNet among the loaded ``.pt`` checkpoints (path ->
-    checkpoint dict); a ConfigError if none is."""
-    from learn.int8_file import is_int8
-
-    nets = [c for c, k in ckpts.items()
-            if k["config"]["model"]["arch"] == "handsnet" and not is_int8(k)]  # fmt: skip
-    if not nets:
-        saved = any(is_int8(k) for k in ckpts.values())
-        raise ConfigError("--int8 scores HandsNet as an int8 network; no float HandsNet "
-                          "checkpoint was given" + (" (int8 files of handskin quantize are "
-                          "scored as int8 without it)" if saved else "") + ". Fix: add a "
-                          "HandsNet .pt file, or drop --int8")  # fmt: skip
-    return [(c, False, True) for c in nets]
-
-
-def _ensemble_jobs(by_task: dict[str, list[Path]], tta: bool,
-                   ) -> list[tuple[list[Path], bool, bool]]:  # fmt: skip
-    """``--ensemble``'s jobs: each task's networks together, checked alike before any work."""
-    from learn.ensemble import load_members
-
-    groups = [paths for paths in by_task.values() if len(paths) >= 2]
-    if not groups:
-        counts = ", ".join(f"{len(p)} {t}" for t, p in by_task.items()) or "no networks"
-        raise ConfigError(f"--ensemble averages two or more networks of one task; got {counts}. "
-                          "Fix: give two or more classifier or segmenter .pt files")
-    for paths in groups:
-        load_members(paths)
-    return [(paths, t, False) for paths in groups for t in ((False, True) if tta else (False,))]
 
 
 def _needs_torch(command):

@@ -121,14 +121,16 @@ def teacher_probs(teacher: nn.Module, x: torch.Tensor, views: torch.Tensor, temp
     return torch.cat(out)
 
 
-def make_distiller(run, data, progress: bool = True) -> Distiller | None:
+def make_distiller(run, data, progress: bool = True,
+                   checked: dict | None = None) -> Distiller | None:  # fmt: skip
     """The run's :class:`Distiller` over ``data.train`` (a ``learn.folder.Data``), or None when
-    ``run.distill_from`` is empty. The teacher runs in float32 on ``run.device``."""
+    ``run.distill_from`` is empty. The teacher runs in float32 on ``run.device``. ``checked``:
+    the dict :func:`check_teacher` already returned for this run and data (not loaded again)."""
     if not run.distill_from:
         return None
     from learn.train import views_of
 
-    ckpt = check_teacher(run, data.description.get("path"))
+    ckpt = checked if checked is not None else check_teacher(run, data.description.get("path"))
     teacher, _ = model_from_checkpoint(ckpt)
     teacher = teacher.to(memory_format=torch.channels_last)
     probs = teacher_probs(teacher, data.train.x, views_of(run), run.distill_temperature,

@@ -17,7 +17,6 @@ reseeds torch from ``(seed, e)``, so a resumed run equals an uninterrupted one o
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -30,14 +29,7 @@ from tqdm.auto import tqdm
 from learn.augment import mixup, random_shift
 from learn.aux_types import TypeHead
 from learn.averaging import make_ema
-from learn.checkpoint import (
-    BEST,
-    LAST,
-    check_inputs,
-    load_checkpoint,
-    make_checkpoint,
-    save_checkpoint,
-)
+from learn.checkpoint import BEST, LAST, load_checkpoint
 from learn.device import check_device
 from learn.distill import Distiller, make_distiller
 from learn.evaluate import evaluate_tensors, plot_history
@@ -56,8 +48,16 @@ from learn.run_config import (  # noqa: F401 (re-exported: learn.train is where 
     replace_train,
     run_from_dict,
 )
+from learn.run_state import (
+    check_stop_epoch,
+    improved,
+    patience_out,
+    restore,
+    save,
+    weights_copy,
+)
 from learn.tta import PAPER_VIEWS, VIEW_DIMS
-from tactile.config import to_dict, to_toml
+from tactile.config import to_toml
 from tactile.errors import ConfigError
 
 
@@ -209,46 +209,6 @@ def build(run: RunConfig, init_from: str | Path | None = None, num_types: int = 
     return model, optimizer, make_scheduler(optimizer, run.train), head
 
 
-def _state(model: nn.Module) -> dict[str, torch.Tensor]:
-    return {k: v.detach().clone() for k, v in model.state_dict().items()}
-
-
-def _restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None, head=None):
-    """(start epoch, best metric, history, best weights, recorded start) of the run in ``out``
-    (last.pt); loads the weights, optimizer, schedule, weight average (``ema``) and type head
-    (``head``) in place."""
-    ckpt = load_checkpoint(out / LAST)
-    try:  # keys added since the checkpoint was written take their defaults (the old behaviour)
-        theirs = to_dict(run_from_dict(ckpt["config"]))
-    except ConfigError as err:
-        raise ConfigError(f"{out / LAST}: its configuration does not load ({err}); use a new "
-                          "--out") from err  # fmt: skip
-    mine = to_dict(run)
-    mine["train"] = {**mine["train"], "epochs": None}  # may change on resume: the schedule's
-    theirs["train"] = {**theirs["train"], "epochs": None}  # length, and where the run trains
-    mine["device"] = theirs["device"] = None
-    if mine != theirs:
-        raise ConfigError(
-            f"{out / LAST} was trained with another configuration; resume with the same one "
-            "(only train.epochs and device may change) or use a new --out"
-        )
-    check_inputs(ckpt, run.task, str(out / LAST))
-    model.load_state_dict(ckpt["model"])
-    optimizer.load_state_dict(ckpt["optimizer"])
-    scheduler.load_state_dict(ckpt["scheduler"])
-    if ema is not None:
-        ema.load_state_dict(ckpt["ema"])
-    if head is not None:
-        head.load_state_dict(ckpt["type_head"])
-    best_state = load_checkpoint(out / BEST)["model"] if (out / BEST).is_file() else _state(model)
-    return (int(ckpt["epoch"]), float(ckpt["best_metric"]), list(ckpt["history"]), best_state,
-            ckpt.get("init"))  # fmt: skip
-
-
-def _improved(metric: float, best: float) -> bool:
-    return not math.isnan(metric) and (math.isnan(best) or metric > best)
-
-
 def fit(
     run: RunConfig,
     data: Data,
@@ -259,6 +219,7 @@ def fit(
     progress: bool = True,
     stop_after_epoch: int | None = None,
     on_epoch: Callable[[int, torch.optim.Optimizer], None] | None = None,
+    teacher: dict | None = None,
 ) -> FitResult:
     """Train ``run`` on ``data.train``, validating on ``data.val`` (if any) after every epoch.
 
@@ -270,6 +231,8 @@ def fit(
     resumes) is done, to split a long run; the schedule stays that of ``run.train.epochs`` and
     ``resume`` continues it. ConfigError if it is below 1 or not after the resumed epoch.
     on_epoch : called as ``on_epoch(epoch, optimizer)`` before each epoch's training.
+    teacher : ``run.distill_from``'s checkpoint as `learn.distill.check_teacher` returned it
+    (checked before the data were loaded; None checks and loads it here).
     With ``run.train.ema_decay`` the weight average (``learn.averaging``) is validated, saved as
     best.pt and returned; last.pt keeps the raw weights and the average (``"ema"``) to resume.
     """
@@ -282,13 +245,13 @@ def fit(
     loss_fn = make_loss(run, data.train).to(run.device)
     val_loss_fn = (make_loss(run, data.train, validation=True).to(run.device)
                    if run.train.label_smoothing else loss_fn)  # fmt: skip
-    distiller = make_distiller(run, data, progress)
-    start, best, history, best_state = 0, float("nan"), [], _state(scored)
+    distiller = make_distiller(run, data, progress, teacher)
+    start, best, history, best_state = 0, float("nan"), [], weights_copy(scored)
     if resume and out is not None and (out / LAST).is_file():
-        start, best, history, best_state, first = _restore(out, run, model, optimizer, scheduler,
-                                                           ema, head)  # fmt: skip
+        start, best, history, best_state, first = restore(out, run, model, optimizer, scheduler,
+                                                          ema, head)  # fmt: skip
         init_from = first if first not in (None, "random") else init_from
-    _check_stop(stop_after_epoch, start, run.train.epochs, None if out is None else out / LAST)
+    check_stop_epoch(stop_after_epoch, start, run.train.epochs, None if out is None else out / LAST)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         (out / "run.toml").write_text(to_toml(run))
@@ -300,12 +263,12 @@ def fit(
                          scored, head, distiller)  # fmt: skip
         scheduler.step()
         history.append(row)
-        if _improved(row.get("val_metric", float("nan")), best) or data.val is None:
+        if improved(row.get("val_metric", float("nan")), best) or data.val is None:
             best = row.get("val_metric", best)
-            best_state = _state(scored)
-            _save(out, BEST, scored, optimizer, scheduler, run, data, epoch, best, history,
+            best_state = weights_copy(scored)
+            save(out, BEST, scored, optimizer, scheduler, run, data, epoch, best, history,
                   init_from)
-        _save(out, LAST, model, optimizer, scheduler, run, data, epoch, best, history, init_from,
+        save(out, LAST, model, optimizer, scheduler, run, data, epoch, best, history, init_from,
               ema=ema, head=head)
         if out is not None:
             title = f"{run.model.arch}, seed {run.train.seed}"
@@ -319,31 +282,6 @@ def fit(
     if data.val is not None:
         scored.load_state_dict(best_state)
     return FitResult(scored.to("cpu"), history, best, out, paused)
-
-
-def check_stop(stop_after_epoch: int | None, run: RunConfig, out_dir: str | Path | None = None,
-               resume: bool = False) -> None:  # fmt: skip
-    """ConfigError unless ``stop_after_epoch`` ends an epoch that :func:`fit` would train for
-    ``run`` (resumed from ``out_dir/last.pt`` when ``resume``): checked before data is loaded."""
-    last = None if out_dir is None else Path(out_dir) / LAST
-    start = int(load_checkpoint(last)["epoch"]) if resume and last and last.is_file() else 0
-    _check_stop(stop_after_epoch, start, run.train.epochs, last)
-
-
-def _check_stop(stop_after_epoch: int | None, start: int, epochs: int, last: Path | None) -> None:
-    """Refuse a stop epoch that could not end an epoch of this (possibly resumed) run."""
-    if stop_after_epoch is None:
-        return
-    if not 1 <= stop_after_epoch <= epochs:
-        raise ConfigError(f"stop after epoch {stop_after_epoch}: the run's epochs are 1 to "
-                          f"{epochs}. Fix: give one of them (the schedule's length is "
-                          "train.epochs)")  # fmt: skip
-    if stop_after_epoch <= start:
-        raise ConfigError(
-            f"{last} already holds epoch {start}, so stopping after epoch "
-            f"{stop_after_epoch} would train nothing. Fix: give a later epoch, or leave the "
-            "stop out to finish the run"
-        )
 
 
 @flushing()
@@ -375,28 +313,3 @@ def _num_types(run: RunConfig, data: Data) -> int:
                           "types. Fix: load them with learn.train.load_data(path, run), which "
                           "reads them for such a run")  # fmt: skip
     return len(data.type_names)
-
-
-def patience_out(history: list[dict], run: RunConfig) -> bool:
-    """True when the val metric has not improved for ``patience_epochs`` epochs."""
-    k = run.patience_epochs
-    vals = [h.get("val_metric", float("nan")) for h in history]
-    if not k or len(vals) <= k or all(math.isnan(v) for v in vals):
-        return False
-    return max(vals[-k:]) <= max(v for v in vals[:-k] if not math.isnan(v))
-
-
-def _save(out, name, model, optimizer, scheduler, run, data: Data, epoch, best, history,
-          init_from=None, ema=None, head=None) -> None:  # fmt: skip
-    if out is None:
-        return
-    extra = {} if ema is None else {"ema": ema.state_dict()}  # last.pt: to resume the average
-    if head is not None:  # last.pt: to resume the type head (best.pt holds the plain network)
-        extra["type_head"] = head.state_dict()
-    ckpt = make_checkpoint(
-        model, to_dict(run), epoch=epoch + 1, best_metric=best, optimizer=optimizer,
-        scheduler=scheduler, history=history, class_names=list(data.class_names),
-        seed=run.train.seed, task=run.task, data=data.description,
-        init="random" if init_from is None else str(init_from), **extra,
-    )  # fmt: skip
-    save_checkpoint(ckpt, out / name)

@@ -77,7 +77,7 @@ def finished(out_dir: str | Path, run) -> bool:
     """True when ``out_dir/last.pt`` ends ``run``: its schedule's last epoch is done, or
     patience stopped it; False for a stopped (paused or killed) run, and without last.pt."""
     from learn.checkpoint import LAST, load_checkpoint
-    from learn.train import patience_out
+    from learn.run_state import patience_out
 
     last = Path(out_dir) / LAST
     if not last.is_file():

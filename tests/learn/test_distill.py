@@ -182,3 +182,27 @@ def test_the_train_command_distils_and_refuses_a_segmenter_before_work(tiny_data
     assert res.exit_code == 0, res.output
     cfg = load_checkpoint(tmp_path / "kd" / "best.pt")["config"]
     assert (cfg["distill_from"], cfg["distill_weight"]) == (str(checkpoints["handsnet"]), 0.25)
+
+
+def test_the_train_command_checks_the_teacher_once(tiny_dataset, checkpoints, tmp_path):
+    """The teacher is checked before the data load and not again in fit: one split warning."""
+    import warnings
+
+    import typer
+    from typer.testing import CliRunner
+
+    from learn.cli import register
+
+    app = typer.Typer()
+    register(app)
+    config = tmp_path / "run.toml"  # another seed: another validation split than the teacher's
+    config.write_text("threads = 1\n[model]\ninput_size = [32, 48]\n"
+                      "[train]\nepochs = 1\nbatch_size = 16\nseed = 5\n")  # fmt: skip
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = CliRunner().invoke(app, ["train", str(tiny_dataset), "--config", str(config),
+                                       "--no-progress", "--out", str(tmp_path / "kd"),
+                                       "--distill-from", str(checkpoints["handsnet"])])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    split = [w for w in caught if "validation split" in str(w.message)]
+    assert len(split) == 1, [str(w.message) for w in split]
