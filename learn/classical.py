@@ -185,7 +185,8 @@ def train_classical(arch: str, data: str | Path, out: str | Path, *, seed: int =
             list(hand_classes), "n_train": len(y)}  # fmt: skip
     cfg, arrays = model.to_arrays()
     meta = {"kind": arch, "config": cfg, "input_size": list(size), "class_names": list(names),
-            "seed": seed, "versions": versions(), "data": desc}  # fmt: skip
+            "seed": seed, "versions": versions(), "data": desc,
+            "ancestry": getattr(model, "learned_from", [])}  # vgg_svm: its VGG16's # fmt: skip
     save_npz(out / MODEL_FILE, meta, arrays)
     x, y, _ = split_images(data, "test", size, hand_classes, seed, progress)
     cm = confusion(y, model.predict(x), len(names))
@@ -280,5 +281,5 @@ def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
             "seed": meta["seed"], "config": meta["config"],
             "input_size": meta["input_size"], "train_versions": meta["versions"],
             "train_data": meta.get("data"), "test_data": str(data),
-            "shared_with_training": shared_with_training(meta.get("data"), data),
+            "shared_with_training": shared_with_training(meta, data),
             **found}  # fmt: skip

@@ -211,6 +211,10 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
                               "validation people, so the folds would not be held out. Fix: "
                               "cross-validate without the teacher, then distil the pick")
         teacher = check_teacher(run, data)
+    if init is not None:
+        from learn.finetune import check_init
+
+        typer.echo(f"--init {init}: {check_init(run, init, data).summary()}")
     if cv_grid and stop is not None:
         raise ConfigError("--stop-after-epoch with --cv-grid: the grid's pick would be lost on "
                           "--resume. Fix: cross-validate first, then train the pick in parts")

@@ -66,7 +66,7 @@ def check_teacher(run, data_path: str | Path | None) -> dict:
     file is missing, is not a classifier of the student's classes and input, or has trained on
     people or objects in ``data_path``'s test split. Warns when it trained on the same dataset
     with another validation split (it has then seen some of the student's validation people)."""
-    from learn.leakage import shared_groups
+    from learn.leakage import lineage, shared_groups
     from learn.run_config import run_from_dict
 
     path = Path(run.distill_from)
@@ -84,16 +84,18 @@ def check_teacher(run, data_path: str | Path | None) -> dict:
         raise ConfigError(f"distill_from {path}: the teacher's {'; '.join(wrong)} differ. Fix: "
                           "a teacher trained for the same task, classes, input_size and canvas")
     trained_on = (ckpt.get("data") or {}).get("path")
-    if data_path is not None and trained_on:
-        shared = shared_groups(trained_on, data_path)
+    learned = [r["path"] for r in lineage(ckpt)]  # its data and its own starts' and teachers'
+    if data_path is not None and learned:
+        shared = shared_groups(learned, data_path)
         if shared and shared["test_samples"]:
             raise ConfigError(
-                f"distill_from {path}: the teacher was trained on {trained_on}, which shares "
+                f"distill_from {path}: the teacher learned from {', '.join(map(str, learned))}, "
+                "which share "
                 f"{len(shared['subjects'])} subjects and {len(shared['instances'])} object "
                 f"instances with {shared['test_samples']} test samples of {data_path}, so the "
                 "student would learn its test people. Fix: a teacher trained on this dataset"
             )
-        same = Path(trained_on).resolve() == Path(data_path).resolve()
+        same = trained_on and Path(trained_on).resolve() == Path(data_path).resolve()
         if same and (theirs.train.seed, theirs.val_fraction) != (run.train.seed, run.val_fraction):
             warnings.warn(
                 f"distill_from {path}: the teacher's validation split (seed "

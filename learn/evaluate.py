@@ -9,6 +9,7 @@ checkpoint's row of the report (``learn.eval_report`` writes it beside the paper
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -304,7 +305,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "canvas_mm": run.model.canvas_mm and list(run.model.canvas_mm),
            "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
            "test_data": str(data_path), "init": ckpt.get("init"),
-           "shared_with_training": shared_with_training(ckpt.get("data"), data_path),
+           "shared_with_training": shared_with_training(ckpt, data_path),
            **found, "segmentation_by_group": seg_groups, "worst": worst,
            "mean_iou_interval": miou_interval and miou_interval[:2],
            "mean_iou_interval_groups": miou_interval and miou_interval[2:],
@@ -356,12 +357,11 @@ def _ensemble_fields(members: list, views: list | None, data_path: str | Path) -
     records, no single epoch, seed or config; training data and leakage pooled."""
     datas = [m.ckpt.get("data") or {} for m in members]
     same_data = all(d.get("path") == datas[0].get("path") for d in datas)
-    shared = [shared_with_training(d, data_path) for d in datas]
-    worst = max(shared, key=lambda s: -1 if s is None else s["test_samples"])
     return {
         "checkpoint": " + ".join(str(m.path) for m in members), "arch": "ensemble",
         "epoch": None, "seed": None, "config": None, "init": None,
-        "train_data": datas[0] if same_data else None, "shared_with_training": worst,
+        "train_data": datas[0] if same_data else None,
+        "shared_with_training": shared_with_training([m.ckpt for m in members], data_path),
         "tta_views": sorted({v for vs in views for v in vs}) if views else None,
         "members": [{"checkpoint": str(m.path), "arch": m.run.model.arch,
                      "width": m.ckpt["config"]["model"].get("width"), "epoch": m.ckpt["epoch"],
@@ -383,10 +383,13 @@ def tta_views(run, ckpt_path: str | Path) -> list[int]:
     return views
 
 
-def shared_with_training(train_data: dict | None, data_path: str | Path) -> dict | None:
-    """``learn.leakage.shared_groups`` of a model's training data (its checkpoint's ``data``
-    record) and the data it is scored on; None when unknown or impossible."""
-    from learn.leakage import shared_groups
+def shared_with_training(models: Mapping | Sequence[Mapping] | None,
+                         data_path: str | Path) -> dict | None:  # fmt: skip
+    """``learn.leakage.shared_groups`` of the data a model learned from (its checkpoint dict or
+    classical model ``meta``: its ``data`` and ``ancestry``, `learn.leakage.lineage`; pooled over
+    an ensemble's list of them) and the data it is scored on; None when unknown or impossible."""
+    from learn.leakage import lineage, shared_groups
 
-    path = (train_data or {}).get("path")
-    return None if not path else shared_groups(path, data_path)
+    many = [models] if models is None or isinstance(models, Mapping) else list(models)
+    paths = [r["path"] for m in many for r in lineage(m)]
+    return shared_groups(paths, data_path) if paths else None

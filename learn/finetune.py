@@ -33,6 +33,13 @@ class LoadReport:
     missing: tuple[str, ...]  # in the model only: left as initialised
     unexpected: tuple[str, ...]  # in the checkpoint only (after renaming): ignored
 
+    def summary(self) -> str:
+        """``"<k> of <n> tensors loaded; <top-level modules> start fresh"``."""
+        fresh = sorted({k.split(".")[0] for k in self.missing + self.shape_mismatch})
+        n = len(self.loaded) + len(self.missing) + len(self.shape_mismatch)
+        return f"{len(self.loaded)} of {n} tensors loaded" + (
+            f"; {', '.join(fresh)} start fresh" if fresh else "")
+
 
 def read_state_dict(source: str | Path | Mapping) -> dict[str, torch.Tensor]:
     """The model state of a checkpoint file or dict: ``{"model": state}`` or a bare state dict."""
@@ -145,3 +152,38 @@ def setup_finetuning(
     report = load_weights(model, checkpoint)
     optimizer = make_optimizer(model, cfg)
     return optimizer, make_scheduler(optimizer, cfg), report
+
+
+def check_init(run, init: str | Path, data_path: str | Path | None) -> LoadReport:
+    """What ``--init`` ``init`` (a .pt checkpoint) loads into ``run``'s network (a ``RunConfig``),
+    checked before any data are read. ConfigError naming the fix when none of its tensors fits
+    (another architecture, width or class count everywhere); a warning when the checkpoint, or
+    one it learned from (`learn.leakage.lineage`), trained on people or objects of
+    ``data_path``'s test split, since the new model's test scores are then not held out."""
+    import warnings
+
+    from learn.checkpoint import load_checkpoint
+    from learn.leakage import lineage, shared_groups
+    from learn.models import create_model
+
+    ckpt = load_checkpoint(init)
+    report = load_weights(create_model(run.model.arch, **run.model.kwargs()), ckpt)
+    if not report.loaded:
+        theirs = (ckpt.get("config") or {}).get("model") or {}
+        raise ConfigError(
+            f"--init {init}: none of its {len(ckpt['model'])} tensors fits a {run.model.arch} "
+            f"of width {run.model.width} and {run.model.num_classes} classes (it holds a "
+            f"{theirs.get('arch', 'unknown')} of width {theirs.get('width')}). Fix: a checkpoint "
+            "of the same network and width, or a vgg16 classifier of the same width for "
+            "segnet / fcn16s (its encoder loads)")
+    paths = [r["path"] for r in lineage(ckpt)]
+    shared = shared_groups(paths, data_path) if paths and data_path is not None else None
+    if shared and shared["test_samples"]:
+        warnings.warn(
+            f"--init {init} learned from {', '.join(map(str, paths))}, which share "
+            f"{len(shared['subjects'])} subjects and {len(shared['instances'])} object instances "
+            f"with {shared['test_samples']} of the {shared['n_test']} test samples of "
+            f"{data_path}: the new model's test scores will not be held out (handskin evaluate "
+            "flags them). Fix: start from a model trained on another subject pool, or generate "
+            "the datasets with --split keyed and one seed", stacklevel=2)  # fmt: skip
+    return report

@@ -15,6 +15,7 @@ objects it was trained on. :func:`shared_groups` finds them.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -54,21 +55,10 @@ def _ids(reader: DatasetReader, field: str) -> np.ndarray:
     return np.asarray(reader[field][:], dtype=np.int64)
 
 
-def shared_groups(train_data: str | Path, test_data: str | Path) -> dict | None:
-    """Subjects and object instances of ``train_data``'s train split that are in ``test_data``'s
-    test split, when the two are different datasets that can share them: subjects when both
-    were drawn from one subject pool (the same seed and subject count, any part or size),
-    instances when both come from the generator (any seed) or share a subject pool. None when
-    that cannot happen (the same folder: its split is disjoint by construction; other pools) or
-    cannot be told (a folder missing, or one without a manifest, e.g. ingested real data).
-
-    Returns ``{"subjects": [...], "instances": [...], "test_samples": int, "n_test": int}``: the
-    shared ids and how many of the ``n_test`` test samples carry one.
-    """
-    a, b = _folder(train_data), _folder(test_data)
-    if not is_dataset(a) or not is_dataset(b):
-        return None
-    if a.resolve() == b.resolve():
+def _seen(a: Path, b: Path) -> list[set] | None:
+    """(subject ids, instance ids) of dataset ``a``'s train split that could be in dataset ``b``
+    (an empty set for a pool they do not share); None when they can share nothing."""
+    if not is_dataset(a) or not is_dataset(b) or a.resolve() == b.resolve():
         return None
     pools_a, pools_b = _pools(a), _pools(b)
     if pools_a is None or pools_b is None:
@@ -76,10 +66,37 @@ def shared_groups(train_data: str | Path, test_data: str | Path) -> dict | None:
     same = [pa == pb for pa, pb in zip(pools_a, pools_b, strict=True)]
     if not any(same):
         return None
-    with DatasetReader(a) as ra, DatasetReader(b) as rb:
-        train, test = ra.splits["train"], rb.splits["test"]
-        seen = [set(_ids(ra, f)[train].tolist()) - {-1} if ok else set()
+    with DatasetReader(a) as ra:
+        train = ra.splits["train"]
+        return [set(_ids(ra, f)[train].tolist()) - {-1} if ok else set()
                 for f, ok in zip(("subject_id", "instance_id"), same, strict=True)]  # fmt: skip
+
+
+def shared_groups(train_data: str | Path | Sequence[str | Path],
+                  test_data: str | Path) -> dict | None:  # fmt: skip
+    """Subjects and object instances of ``train_data``'s train split (of each, for several
+    datasets: a model's :func:`lineage`) that are in ``test_data``'s test split, when the two are
+    different datasets that can share them: subjects when both were drawn from one subject pool
+    (the same seed and subject count, any part or size), instances when both come from the
+    generator (any seed) or share a subject pool. None when that cannot happen for any of them
+    (the same folder: its split is disjoint by construction; other pools) or cannot be told (a
+    folder missing, or one without a manifest, e.g. ingested real data).
+
+    Returns ``{"subjects": [...], "instances": [...], "test_samples": int, "n_test": int}``: the
+    shared ids and how many of the ``n_test`` test samples carry one.
+    """
+    many = [train_data] if isinstance(train_data, str | Path) else list(train_data)
+    b = _folder(test_data)
+    seen: list[set] = [set(), set()]  # subject and instance ids trained on, over the datasets
+    can_share = False
+    for a in {_folder(d).resolve(): _folder(d) for d in many}.values():
+        if (found := _seen(a, b)) is not None:
+            can_share = True
+            seen = [s | f for s, f in zip(seen, found, strict=True)]
+    if not can_share:
+        return None
+    with DatasetReader(b) as rb:
+        test = rb.splits["test"]
         ids = [_ids(rb, f)[test] for f in ("subject_id", "instance_id")]
     hit = np.zeros(len(test), dtype=bool)
     shared = []
@@ -97,6 +114,46 @@ def leakage_note(shared: dict | None) -> str | None:
         return None
     return (f"**Not held out**: {shared['test_samples']} of the {shared['n_test']} test samples "
             f"come from {len(shared['subjects'])} subjects and {len(shared['instances'])} object "
-            "instances this model was trained on (the training dataset shares people or objects "
+            "instances this model was trained on, or a checkpoint it started from or learned "
+            "from (`learn.leakage.lineage`: those training datasets share people or objects "
             "with this one but not its split). Fix: score it on its own dataset's test split, "
-            "or generate both with --split keyed and one seed.")
+            "or generate them with --split keyed and one seed.")
+
+
+def lineage(ckpt: Mapping | None) -> list[dict]:
+    """The training-data records (``{"path": ..., ...}``) a model's weights learned from: its
+    checkpoint's own ``data`` and its recorded ``ancestry`` (those of the checkpoint it started
+    from, ``--init``, and of its teacher, ``distill_from``, recursively). Records without a path
+    (data given as tensors) are left out."""
+    if not ckpt:
+        return []
+    records = [ckpt.get("data") or {}, *(ckpt.get("ancestry") or [])]
+    return _unique([r for r in records if isinstance(r, Mapping) and r.get("path")])
+
+
+def ancestry(*sources: str | Path | Mapping | None) -> list[dict]:
+    """The ``ancestry`` a new model records: the :func:`lineage` of each checkpoint it starts
+    from or learns from (``sources``: paths or checkpoint dicts; None, "random" and model files
+    that are not checkpoints are skipped), each dataset once."""
+    from learn.checkpoint import load_checkpoint
+
+    records = []
+    for src in sources:
+        if src is None or src == "random":
+            continue
+        if not isinstance(src, Mapping):
+            if Path(src).suffix != ".pt" or not Path(src).is_file():
+                continue
+            src = load_checkpoint(src)
+        records += lineage(src)
+    return _unique(records)
+
+
+def _unique(records: list[dict]) -> list[dict]:
+    """``records`` with each data path once (the first record of it kept)."""
+    seen, out = set(), []
+    for r in records:
+        if str(r["path"]) not in seen:
+            seen.add(str(r["path"]))
+            out.append(dict(r))
+    return out

@@ -33,7 +33,8 @@ def weights_copy(model: nn.Module) -> dict[str, torch.Tensor]:
 
 
 def restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None, head=None):
-    """(start epoch, best metric, history, best weights, recorded start) of the run in ``out``
+    """(start epoch, best metric, history, best weights, recorded start, recorded ancestry:
+    None in checkpoints from before it was recorded) of the run in ``out``
     (last.pt); loads the weights, optimizer, schedule, weight average (``ema``) and type head
     (``head``) in place."""
     ckpt = load_checkpoint(out / LAST)
@@ -62,7 +63,7 @@ def restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None, he
     best = out / BEST
     best_state = load_checkpoint(best)["model"] if best.is_file() else weights_copy(model)
     return (int(ckpt["epoch"]), float(ckpt["best_metric"]), list(ckpt["history"]), best_state,
-            ckpt.get("init"))  # fmt: skip
+            ckpt.get("init"), ckpt.get("ancestry"))  # fmt: skip
 
 
 def improved(metric: float, best: float) -> bool:
@@ -107,9 +108,11 @@ def patience_out(history: list[dict], run: RunConfig) -> bool:
 
 
 def save(out, name, model, optimizer, scheduler, run, data: Data, epoch, best, history,
-          init_from=None, ema=None, head=None) -> None:  # fmt: skip
+          init_from=None, ema=None, head=None, ancestry=None) -> None:  # fmt: skip
     """Write ``out/name`` (``LAST`` or ``BEST``) for the epoch just trained (0-based ``epoch``);
-    nothing when ``out`` is None. ``ema`` / ``head``: kept in last.pt to resume them."""
+    nothing when ``out`` is None. ``ema`` / ``head``: kept in last.pt to resume them.
+    ``ancestry``: the data records of the checkpoints it started from and learned from
+    (`learn.leakage.ancestry`), kept so evaluation knows what the weights have seen."""
     if out is None:
         return
     extra = {} if ema is None else {"ema": ema.state_dict()}  # last.pt: to resume the average
@@ -119,6 +122,6 @@ def save(out, name, model, optimizer, scheduler, run, data: Data, epoch, best, h
         model, to_dict(run), epoch=epoch + 1, best_metric=best, optimizer=optimizer,
         scheduler=scheduler, history=history, class_names=list(data.class_names),
         seed=run.train.seed, task=run.task, data=data.description,
-        init="random" if init_from is None else str(init_from), **extra,
+        init="random" if init_from is None else str(init_from), ancestry=ancestry or [], **extra,
     )  # fmt: skip
     save_checkpoint(ckpt, out / name)

@@ -36,6 +36,7 @@ from learn.evaluate import evaluate_tensors, plot_history
 from learn.fastpath import bf16_supported
 from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
+from learn.leakage import ancestry
 from learn.losses import SegmentationLoss
 from learn.models import create_model
 from learn.numerics import flushing
@@ -247,10 +248,13 @@ def fit(
                    if run.train.label_smoothing else loss_fn)  # fmt: skip
     distiller = make_distiller(run, data, progress, teacher)
     start, best, history, best_state = 0, float("nan"), [], weights_copy(scored)
+    learned_from = None  # the data records of the start and the teacher (learn.leakage.lineage)
     if resume and out is not None and (out / LAST).is_file():
-        start, best, history, best_state, first = restore(out, run, model, optimizer, scheduler,
-                                                          ema, head)  # fmt: skip
+        start, best, history, best_state, first, learned_from = restore(
+            out, run, model, optimizer, scheduler, ema, head)  # fmt: skip
         init_from = first if first not in (None, "random") else init_from
+    if learned_from is None:
+        learned_from = ancestry(init_from, teacher if teacher is not None else run.distill_from)
     check_stop_epoch(stop_after_epoch, start, run.train.epochs, None if out is None else out / LAST)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -267,9 +271,9 @@ def fit(
             best = row.get("val_metric", best)
             best_state = weights_copy(scored)
             save(out, BEST, scored, optimizer, scheduler, run, data, epoch, best, history,
-                  init_from)
+                 init_from, ancestry=learned_from)
         save(out, LAST, model, optimizer, scheduler, run, data, epoch, best, history, init_from,
-              ema=ema, head=head)
+             ema=ema, head=head, ancestry=learned_from)
         if out is not None:
             title = f"{run.model.arch}, seed {run.train.seed}"
             best_epoch = next((h["epoch"] for h in history if h.get("val_metric") == best), None)

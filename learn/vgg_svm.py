@@ -72,6 +72,7 @@ class VggSvmClassifier:
         self.mean: np.ndarray | None = None  # (D,) feature mean (0 without standardisation)
         self.scale: np.ndarray | None = None  # (D,) feature sd (1 where 0 or not standardised)
         self.svm: LinearSvm | None = None
+        self.learned_from: list[dict] = []  # the network's training data (learn.leakage.lineage)
 
     @classmethod
     def from_checkpoint(cls, path: str | Path, cfg: VggSvmConfig | None = None, *,
@@ -88,7 +89,11 @@ class VggSvmClassifier:
             raise ConfigError(f"{path} centres its inputs on a {run.model.canvas_mm} mm canvas; "
                               "VGG16 + SVM reads images stretched to the input. Fix: a VGG16 "
                               "trained without model.canvas_mm")  # fmt: skip
-        return cls(model, cfg, seed=seed, run_config=ckpt["config"])
+        from learn.leakage import lineage
+
+        out = cls(model, cfg, seed=seed, run_config=ckpt["config"])
+        out.learned_from = lineage(ckpt)
+        return out
 
     @property
     def input_size(self) -> tuple[int, int]:

@@ -107,3 +107,76 @@ def test_report_flags_scores_that_are_not_held_out(tiny_dataset, checkpoints, tm
              ("object instances", any(instance[i] in seen_i for i in test)))
     what = " or ".join(w for w, hit in kinds if hit)
     assert what and f"not held out: {expected} test samples share its {what} |" in text
+
+
+def _expected_hits(tiny_dataset, train_sets: list[np.ndarray], test: np.ndarray) -> int:
+    """Samples of ``test`` whose subject or instance is in any of ``train_sets`` (indices into
+    the tiny dataset, which every resplit copy shares), counted from the raw ids."""
+    with DatasetReader(tiny_dataset) as ds:
+        subject, instance = ds.subject_id[:], ds.instance_id[:]
+    train = np.concatenate(train_sets)
+    seen_s, seen_i = set(subject[train].tolist()) - {-1}, set(instance[train].tolist()) - {-1}
+    return sum(subject[i] in seen_s or instance[i] in seen_i for i in test)
+
+
+def test_shared_groups_pools_several_training_sets(tiny_dataset, tmp_path):
+    with DatasetReader(tiny_dataset) as ds:
+        train, test = ds.splits["train"], ds.splits["test"]
+    n = len(train) + len(test)
+    a = resplit(tiny_dataset, tmp_path / "a", np.sort(np.r_[test, train[: len(train) // 2]]))
+    b = resplit(tiny_dataset, tmp_path / "b", np.sort(np.r_[test, train[len(train) // 2 :]]))
+    target = resplit(tiny_dataset, tmp_path / "t", train)  # its test: the tiny set's train
+    a_train = np.setdiff1d(np.arange(n), np.r_[test, train[: len(train) // 2]])
+    b_train = np.setdiff1d(np.arange(n), np.r_[test, train[len(train) // 2 :]])
+    one, both = shared_groups(a, target), shared_groups([a, b, tiny_dataset], target)
+    assert one["test_samples"] == _expected_hits(tiny_dataset, [a_train], train)
+    assert both["test_samples"] == _expected_hits(tiny_dataset, [a_train, b_train], train)
+    assert both["test_samples"] == len(train) > one["test_samples"]
+    assert shared_groups([target, target / "dataset.h5"], target) is None  # its own split
+
+
+def test_a_model_started_from_a_leaky_checkpoint_is_flagged(tiny_dataset, tiny_run, tmp_path):
+    """A network fine-tuned on the tiny set from one pretrained on a copy whose training split
+    holds the tiny set's test people: --init warns, and evaluation says it is not held out,
+    though its own training data is the tiny set's train split."""
+    import pytest
+
+    from learn.finetune import check_init
+    from learn.train import fit, load_data
+
+    with DatasetReader(tiny_dataset) as ds:
+        train, test = ds.splits["train"], ds.splits["test"]
+    n = len(train) + len(test)
+    other = resplit(tiny_dataset, tmp_path / "other", train[::2])  # trains on our test people
+    run = tiny_run("handsnet", epochs=1)
+    fit(run, load_data(other, run), tmp_path / "pre", progress=False)
+    with pytest.warns(UserWarning, match="will not be held out"):
+        check_init(run, tmp_path / "pre" / "best.pt", tiny_dataset)
+    fit(run, load_data(tiny_dataset, run), tmp_path / "ft", progress=False,
+        init_from=tmp_path / "pre" / "best.pt")  # fmt: skip
+    row = evaluate_checkpoint(tmp_path / "ft" / "best.pt", tiny_dataset, time_runs=2)
+    expected = _expected_hits(tiny_dataset, [np.setdiff1d(np.arange(n), train[::2])], test)
+    assert row["shared_with_training"]["test_samples"] == expected > 0
+    assert "**Not held out**" in write_report([row], tmp_path / "r.md").read_text()
+    # the same network started from one trained on the tiny set itself is held out
+    fit(run, load_data(tiny_dataset, run), tmp_path / "ft2", progress=False,
+        init_from=tmp_path / "ft" / "best.pt")  # fmt: skip
+    row2 = evaluate_checkpoint(tmp_path / "ft2" / "best.pt", tiny_dataset, time_runs=2)
+    assert row2["shared_with_training"]["test_samples"] == expected  # the grandparent's data
+
+
+def test_init_loading_nothing_is_refused_and_a_vgg_encoder_loads(tiny_dataset, tiny_run,
+                                                                 checkpoints, tmp_path):
+    import pytest
+
+    from learn.finetune import check_init
+    from learn.train import fit, load_data
+    from tactile.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"none of its \d+ tensors fits a segnet"):
+        check_init(tiny_run("segnet"), checkpoints["handsnet"], tiny_dataset)
+    vgg = tiny_run("vgg16", epochs=1)
+    fit(vgg, load_data(tiny_dataset, vgg), tmp_path / "vgg", progress=False)
+    got = check_init(tiny_run("segnet"), tmp_path / "vgg" / "best.pt", tiny_dataset)
+    assert got.loaded and all(k.startswith("encoder.") for k in got.loaded)
+    assert "decoder" in got.summary() and "encoder" not in got.summary().split(";")[1]
