@@ -242,6 +242,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
     n_cls = run.model.num_classes
     on_dataset = is_dataset(data_path)
     classify_data = run.task == "classify" and on_dataset
+    scored = np.asarray(split.indices, dtype=np.int64) if on_dataset else None  # dataset indices
     if int8:  # a ConfigError for another network; calibrated on training images, not test
         from learn.quantize import int8_with_note
 
@@ -305,7 +306,7 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "canvas_mm": run.model.canvas_mm and list(run.model.canvas_mm),
            "train_versions": ckpt.get("versions"), "train_data": ckpt.get("data"),
            "test_data": str(data_path), "init": ckpt.get("init"),
-           "shared_with_training": shared_with_training(ckpt, data_path),
+           "shared_with_training": shared_with_training(ckpt, data_path, scored),
            **found, "segmentation_by_group": seg_groups, "worst": worst,
            "mean_iou_interval": miou_interval and miou_interval[:2],
            "mean_iou_interval_groups": miou_interval and miou_interval[2:],
@@ -314,7 +315,8 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
            "test_groups": None if groups is None else groups.tolist(),
            "tta_views": views and views[0],
            "int8": int8_note if int8 else None}  # fmt: skip
-    return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path)}
+    return row if len(members) == 1 else {**row, **_ensemble_fields(members, views, data_path,
+                                                                     scored)}
 
 
 def read_test_split(data_path: Path, run: RunConfig,
@@ -352,7 +354,8 @@ def _data_files(path: Path) -> list[Path]:
     return sorted(f for f in files if f.is_file())
 
 
-def _ensemble_fields(members: list, views: list | None, data_path: str | Path) -> dict:
+def _ensemble_fields(members: list, views: list | None, data_path: str | Path,
+                     scored: np.ndarray | None = None) -> dict:  # fmt: skip
     """The fields of an ensemble's row that differ from a single network's: per-member
     records, no single epoch, seed or config; training data and leakage pooled."""
     datas = [m.ckpt.get("data") or {} for m in members]
@@ -361,7 +364,8 @@ def _ensemble_fields(members: list, views: list | None, data_path: str | Path) -
         "checkpoint": " + ".join(str(m.path) for m in members), "arch": "ensemble",
         "epoch": None, "seed": None, "config": None, "init": None,
         "train_data": datas[0] if same_data else None,
-        "shared_with_training": shared_with_training([m.ckpt for m in members], data_path),
+        "shared_with_training": shared_with_training([m.ckpt for m in members], data_path,
+                                                     scored),
         "tta_views": sorted({v for vs in views for v in vs}) if views else None,
         "members": [{"checkpoint": str(m.path), "arch": m.run.model.arch,
                      "width": m.ckpt["config"]["model"].get("width"), "epoch": m.ckpt["epoch"],
@@ -383,13 +387,14 @@ def tta_views(run, ckpt_path: str | Path) -> list[int]:
     return views
 
 
-def shared_with_training(models: Mapping | Sequence[Mapping] | None,
-                         data_path: str | Path) -> dict | None:  # fmt: skip
+def shared_with_training(models: Mapping | Sequence[Mapping] | None, data_path: str | Path,
+                         among: np.ndarray | None = None) -> dict | None:  # fmt: skip
     """``learn.leakage.shared_groups`` of the data a model learned from (its checkpoint dict or
     classical model ``meta``: its ``data`` and ``ancestry``, `learn.leakage.lineage`; pooled over
-    an ensemble's list of them) and the data it is scored on; None when unknown or impossible."""
+    an ensemble's list of them) and the data it is scored on (``among``: the dataset indices of
+    the samples scored; default its test split); None when unknown or impossible."""
     from learn.leakage import lineage, shared_groups
 
     many = [models] if models is None or isinstance(models, Mapping) else list(models)
     paths = [r["path"] for m in many for r in lineage(m)]
-    return shared_groups(paths, data_path) if paths else None
+    return shared_groups(paths, data_path, among) if paths else None

@@ -163,7 +163,7 @@ def check_init(run, init: str | Path, data_path: str | Path | None) -> LoadRepor
     import warnings
 
     from learn.checkpoint import load_checkpoint
-    from learn.leakage import lineage, shared_groups
+    from learn.leakage import lineage, shared_groups, test_hands
     from learn.models import create_model
 
     ckpt = load_checkpoint(init)
@@ -177,7 +177,10 @@ def check_init(run, init: str | Path, data_path: str | Path | None) -> LoadRepor
             "of the same network and width, or a vgg16 classifier of the same width for "
             "segnet / fcn16s (its encoder loads)")
     paths = [r["path"] for r in lineage(ckpt)]
-    shared = shared_groups(paths, data_path) if paths and data_path is not None else None
+    shared = None
+    if paths and data_path is not None:  # a segmenter is scored on the test hands only
+        among = test_hands(data_path) if run.task == "segment" else None
+        shared = shared_groups(paths, data_path, among)
     if shared and shared["test_samples"]:
         warnings.warn(
             f"--init {init} learned from {', '.join(map(str, paths))}, which share "

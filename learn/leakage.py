@@ -72,8 +72,8 @@ def _seen(a: Path, b: Path) -> list[set] | None:
                 for f, ok in zip(("subject_id", "instance_id"), same, strict=True)]  # fmt: skip
 
 
-def shared_groups(train_data: str | Path | Sequence[str | Path],
-                  test_data: str | Path) -> dict | None:  # fmt: skip
+def shared_groups(train_data: str | Path | Sequence[str | Path], test_data: str | Path,
+                  among: np.ndarray | None = None) -> dict | None:  # fmt: skip
     """Subjects and object instances of ``train_data``'s train split (of each, for several
     datasets: a model's :func:`lineage`) that are in ``test_data``'s test split, when the two are
     different datasets that can share them: subjects when both were drawn from one subject pool
@@ -82,8 +82,10 @@ def shared_groups(train_data: str | Path | Sequence[str | Path],
     (the same folder: its split is disjoint by construction; other pools) or cannot be told (a
     folder missing, or one without a manifest, e.g. ingested real data).
 
-    Returns ``{"subjects": [...], "instances": [...], "test_samples": int, "n_test": int}``: the
-    shared ids and how many of the ``n_test`` test samples carry one.
+    ``among``: the dataset indices of the test samples scored (a segmenter's: the hands), by
+    default the whole test split. Returns ``{"subjects": [...], "instances": [...],
+    "test_samples": int, "n_test": int}``: the shared ids and how many of the ``n_test`` test
+    samples carry one.
     """
     many = [train_data] if isinstance(train_data, str | Path) else list(train_data)
     b = _folder(test_data)
@@ -96,7 +98,7 @@ def shared_groups(train_data: str | Path | Sequence[str | Path],
     if not can_share:
         return None
     with DatasetReader(b) as rb:
-        test = rb.splits["test"]
+        test = rb.splits["test"] if among is None else np.asarray(among, dtype=np.int64)
         ids = [_ids(rb, f)[test] for f in ("subject_id", "instance_id")]
     hit = np.zeros(len(test), dtype=bool)
     shared = []
@@ -106,6 +108,17 @@ def shared_groups(train_data: str | Path | Sequence[str | Path],
         hit |= np.isin(mine, both)
     return {"subjects": shared[0], "instances": shared[1], "test_samples": int(hit.sum()),
             "n_test": len(test)}  # fmt: skip
+
+
+def test_hands(data_path: str | Path) -> np.ndarray | None:
+    """(K,) int64 dataset indices of the test split's hand samples, the ones a segmenter is
+    scored on; None for a folder that is not a handskin dataset."""
+    folder = _folder(data_path)
+    if not is_dataset(folder):
+        return None
+    with DatasetReader(folder) as ds:
+        test = ds.splits["test"]
+        return test[np.asarray(ds.is_hand[:], dtype=bool)[test]]
 
 
 def leakage_note(shared: dict | None) -> str | None:

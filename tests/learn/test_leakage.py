@@ -180,3 +180,33 @@ def test_init_loading_nothing_is_refused_and_a_vgg_encoder_loads(tiny_dataset, t
     got = check_init(tiny_run("segnet"), tmp_path / "vgg" / "best.pt", tiny_dataset)
     assert got.loaded and all(k.startswith("encoder.") for k in got.loaded)
     assert "decoder" in got.summary() and "encoder" not in got.summary().split(";")[1]
+
+
+def test_a_segmenter_is_judged_on_the_hands_it_is_scored_on(tiny_dataset, checkpoints, tmp_path):
+    """A test split holding training objects is not held out for a classifier, but a segmenter
+    scores the hands only, and those are the dataset's own test hands."""
+    with DatasetReader(tiny_dataset) as ds:
+        own_test, train = ds.splits["test"], ds.splits["train"]
+        is_hand = ds.is_hand[:].astype(bool)
+    objects = train[~is_hand[train]][:6]
+    mixed = resplit(tiny_dataset, tmp_path / "mixed", np.sort(np.r_[own_test, objects]))
+    seg = evaluate_checkpoint(checkpoints["segnet"], mixed, time_runs=2)
+    assert seg["n_test"] == int(is_hand[own_test].sum())
+    assert seg["shared_with_training"] == {"subjects": [], "instances": [], "test_samples": 0,
+                                           "n_test": seg["n_test"]}  # fmt: skip
+    cls = evaluate_checkpoint(checkpoints["handsnet"], mixed, time_runs=2)
+    assert cls["shared_with_training"]["test_samples"] >= len(objects)
+    # so does --init: a warning for the classifier, none for the segmenter
+    import warnings
+
+    import pytest
+
+    from learn.finetune import check_init
+
+    from .conftest import make_run
+
+    with pytest.warns(UserWarning, match="will not be held out"):
+        check_init(make_run("handsnet"), checkpoints["handsnet"], mixed)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_init(make_run("segnet"), checkpoints["segnet"], mixed)
