@@ -211,10 +211,12 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
                               "validation people, so the folds would not be held out. Fix: "
                               "cross-validate without the teacher, then distil the pick")
         teacher = check_teacher(run, data)
+    init_ckpt = None
     if init is not None:
         from learn.finetune import check_init
 
-        typer.echo(f"--init {init}: {check_init(run, init, data).summary()}")
+        loads, init_ckpt = check_init(run, init, data)
+        typer.echo(f"--init {init}: {loads.summary()}")
     if cv_grid and stop is not None:
         raise ConfigError("--stop-after-epoch with --cv-grid: the grid's pick would be lost on "
                           "--resume. Fix: cross-validate first, then train the pick in parts")
@@ -232,7 +234,7 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
     teacher = teacher if fitted is run else None  # classes changed: fit checks the teacher again
     run = fitted
     result = fit(run, loaded, out, resume=resume, init_from=init, progress=progress,
-                 stop_after_epoch=stop, teacher=teacher)  # fmt: skip
+                 stop_after_epoch=stop, teacher=teacher, init_checkpoint=init_ckpt)  # fmt: skip
     if result.paused:
         typer.echo(f"stopped after epoch {stop} of {run.train.epochs} (run in {out}); continue "
                    "with the same command and --resume, without --stop-after-epoch to finish")

@@ -1,6 +1,6 @@
-"""Evaluation: metrics and confusion matrices of a model on tensors, loss curves, and a
-checkpoint's row of the report (``learn.eval_report`` writes it beside the paper's Tables 3 and
-8); the fast inference path and the timing are ``learn.fastpath``.
+"""Evaluation: metrics and confusion matrices of a model on tensors, and a checkpoint's row of
+the report (``learn.eval_report`` writes it beside the paper's Tables 3 and 8); the fast
+inference path and the timing are ``learn.fastpath``, the training curves ``learn.curves``.
 
     res = evaluate_tensors(model, data.test, num_classes=2)   # res.metrics, res.cm, res.percent
     row = evaluate_checkpoint("runs/handsnet/best.pt", "out/forearm")
@@ -8,15 +8,13 @@ checkpoint's row of the report (``learn.eval_report`` writes it beside the paper
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
-from matplotlib.figure import Figure
 from torch import nn
 
 from learn import metrics as M
@@ -102,36 +100,19 @@ def evaluate_tensors(
                       torch.cat(conf) if conf else None)  # fmt: skip
 
 
-def history_figure(history: list[dict], title: str = "", metric: str = "validation metric",
-                   best_epoch: int | None = None) -> Figure:  # fmt: skip
-    """Loss curves (train, val) and the validation metric per epoch; ``best_epoch`` (1-based,
-    the epoch ``best.pt`` holds) is marked on the metric's curve."""
-    fig = Figure(figsize=(9, 3.5), layout="constrained")
-    ax_loss, ax_metric = fig.subplots(1, 2)
-    epochs = [h["epoch"] for h in history]
-    ax_loss.plot(epochs, [h["train_loss"] for h in history], "o-", label="train")
-    if any("val_loss" in h for h in history):
-        values = [h.get("val_metric", math.nan) for h in history]
-        ax_loss.plot(epochs, [h.get("val_loss", math.nan) for h in history], "s-", label="val")
-        ax_metric.plot(epochs, values, "s-", c="C1")
-        if best_epoch in epochs:
-            value = values[epochs.index(best_epoch)]
-            ax_metric.plot([best_epoch], [value], "*", c="C3", ms=14,
-                           label=f"best.pt (epoch {best_epoch}, {value:.4f})")
-            ax_metric.legend(loc="lower right")
-    ax_loss.set(xlabel="epoch", ylabel="loss", title="loss")
-    ax_loss.legend()
-    ax_metric.set(xlabel="epoch", ylabel="fraction", title=f"validation {metric}")
-    fig.suptitle(title)
-    return fig
-
-
-def plot_history(history: list[dict], path: str | Path, title: str = "",
-                 metric: str = "validation metric",
-                 best_epoch: int | None = None) -> Path:  # fmt: skip
-    """:func:`history_figure` saved as a PNG at ``path``."""
-    history_figure(history, title, metric, best_epoch).savefig(path, dpi=100)
-    return Path(path)
+def scored_fast_path(make: Callable[..., nn.Module], test: TensorData, num_classes: int,
+                     ref_accuracy: float | None = None) -> tuple[nn.Module, EvalResult]:
+    """The fast inference path and its test result. ``make(**kw)`` builds it with
+    `learn.fastpath.fast_inference`'s keywords: first bf16 where the CPU has it and its argmax
+    agrees on 64 test images (``check``); if its (pixel) accuracy then strays more than 0.5 points
+    from ``ref_accuracy`` (eval mode's; None skips the check), fp32, so the fast path keeps eval
+    mode's predictions."""
+    fast = make(check=test.x[:64])
+    res = evaluate_tensors(fast, test, num_classes)
+    if ref_accuracy is not None and abs(res.metrics["accuracy"] - ref_accuracy) > 0.005:
+        fast = make(bf16=False)
+        res = evaluate_tensors(fast, test, num_classes)
+    return fast, res
 
 
 def metrics_from_cm(cm: np.ndarray | torch.Tensor) -> dict[str, float]:
@@ -277,11 +258,8 @@ def _evaluate_members(members: list, data_path: str | Path, hand_classes: tuple[
         (t,) = interleaved_cpu_ms([model], size, threads, time_runs, time_rounds)
         ms = {"eval_mode": t, "prepared": t, "fast": t, "compiled": None, "gpu": None}
     else:
-        fast = build(lambda m: fast_inference(m, check=test.x[:64]))
-        res = evaluate_tensors(fast, test, n_cls)
-        if abs(res.metrics["accuracy"] - ref.metrics["accuracy"]) > 0.005:  # keep predictions
-            fast = build(lambda m: fast_inference(m, bf16=False))
-            res = evaluate_tensors(fast, test, n_cls)
+        fast, res = scored_fast_path(lambda **kw: build(lambda m: fast_inference(m, **kw)), test,
+                                     n_cls, ref.metrics["accuracy"])  # fmt: skip
         if compiled:  # at batch 1; its argmax checked on 64 test images, one at a time
             float_path = build(lambda m: fast_inference(m, bf16=False))
             try:

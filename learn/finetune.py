@@ -154,10 +154,13 @@ def setup_finetuning(
     return optimizer, make_scheduler(optimizer, cfg), report
 
 
-def check_init(run, init: str | Path, data_path: str | Path | None) -> LoadReport:
+def check_init(
+    run, init: str | Path, data_path: str | Path | None
+) -> tuple[LoadReport, dict]:
     """What ``--init`` ``init`` (a .pt checkpoint) loads into ``run``'s network (a ``RunConfig``),
-    checked before any data are read. ConfigError naming the fix when none of its tensors fits
-    (another architecture, width or class count everywhere); a warning when the checkpoint, or
+    checked before any data are read, and the loaded checkpoint (for `learn.train.fit`'s
+    ``init_checkpoint``, so it is read once). ConfigError naming the fix when none of its tensors
+    fits (another architecture, width or class count everywhere); a warning when the checkpoint, or
     one it learned from (`learn.leakage.lineage`), trained on people or objects of
     ``data_path``'s test split, since the new model's test scores are then not held out."""
     import warnings
@@ -189,4 +192,4 @@ def check_init(run, init: str | Path, data_path: str | Path | None) -> LoadRepor
             f"{data_path}: the new model's test scores will not be held out (handskin evaluate "
             "flags them). Fix: start from a model trained on another subject pool, or generate "
             "the datasets with --split keyed and one seed", stacklevel=2)  # fmt: skip
-    return report
+    return report, ckpt

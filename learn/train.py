@@ -18,7 +18,7 @@ reseeds torch from ``(seed, e)``, so a resumed run equals an uninterrupted one o
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,9 +30,10 @@ from learn.augment import mixup, random_shift
 from learn.aux_types import TypeHead
 from learn.averaging import make_ema
 from learn.checkpoint import BEST, LAST, load_checkpoint
+from learn.curves import plot_history
 from learn.device import check_device
 from learn.distill import Distiller, make_distiller
-from learn.evaluate import evaluate_tensors, plot_history
+from learn.evaluate import evaluate_tensors
 from learn.fastpath import bf16_supported
 from learn.finetune import load_weights, make_optimizer, make_scheduler
 from learn.folder import Data, TensorData, class_weights, load_data  # noqa: F401 (re-export)
@@ -191,14 +192,15 @@ def check_precision(run: RunConfig) -> None:
         )
 
 
-def build(run: RunConfig, init_from: str | Path | None = None, num_types: int = 0):
-    """Model (seeded init, optionally loaded from a checkpoint), optimizer, step schedule, and
-    with ``num_types`` a type head (`learn.aux_types`, its weights in an optimizer group of its
-    own at the run's lr; else None)."""
+def build(run: RunConfig, init_from: str | Path | Mapping | None = None, num_types: int = 0):
+    """Model (seeded init, optionally loaded from a checkpoint: a .pt path or its loaded dict),
+    optimizer, step schedule, and with ``num_types`` a type head (`learn.aux_types`, its weights
+    in an optimizer group of its own at the run's lr; else None)."""
     torch.manual_seed(run.train.seed)
     model = create_model(run.model.arch, **run.model.kwargs())
     if init_from is not None:
-        load_weights(model, load_checkpoint(init_from))
+        start = init_from if isinstance(init_from, Mapping) else load_checkpoint(init_from)
+        load_weights(model, start)
     if run.task == "classify":  # channels-last convs train ~20 % faster on CPU (oneDNN)
         model = model.to(memory_format=torch.channels_last)
     model = model.to(run.device)  # before the optimizer, whose state follows the parameters
@@ -221,6 +223,7 @@ def fit(
     stop_after_epoch: int | None = None,
     on_epoch: Callable[[int, torch.optim.Optimizer], None] | None = None,
     teacher: dict | None = None,
+    init_checkpoint: dict | None = None,
 ) -> FitResult:
     """Train ``run`` on ``data.train``, validating on ``data.val`` (if any) after every epoch.
 
@@ -233,14 +236,19 @@ def fit(
     ``resume`` continues it. ConfigError if it is below 1 or not after the resumed epoch.
     on_epoch : called as ``on_epoch(epoch, optimizer)`` before each epoch's training.
     teacher : ``run.distill_from``'s checkpoint as `learn.distill.check_teacher` returned it
-    (checked before the data were loaded; None checks and loads it here).
+    (checked before the data were loaded; None checks and loads it here). init_checkpoint :
+    ``init_from``'s checkpoint as `learn.finetune.check_init` loaded it (None loads it here).
     With ``run.train.ema_decay`` the weight average (``learn.averaging``) is validated, saved as
     best.pt and returned; last.pt keeps the raw weights and the average (``"ema"``) to resume.
     """
     check_precision(run)
     torch.set_num_threads(run.threads)
     out = None if out_dir is None else Path(out_dir)
-    model, optimizer, scheduler, head = build(run, init_from, _num_types(run, data))
+    resuming = resume and out is not None and (out / LAST).is_file()
+    init_ckpt = init_checkpoint  # read once for the weights and the lineage
+    if init_ckpt is None and init_from is not None and not resuming:  # resuming: last.pt's
+        init_ckpt = load_checkpoint(init_from)
+    model, optimizer, scheduler, head = build(run, init_ckpt, _num_types(run, data))
     ema = make_ema(model, optimizer, run.train.ema_decay)
     scored = model if ema is None else ema.module  # the weights validated, selected and kept
     loss_fn = make_loss(run, data.train).to(run.device)
@@ -249,12 +257,13 @@ def fit(
     distiller = make_distiller(run, data, progress, teacher)
     start, best, history, best_state = 0, float("nan"), [], weights_copy(scored)
     learned_from = None  # the data records of the start and the teacher (learn.leakage.lineage)
-    if resume and out is not None and (out / LAST).is_file():
+    if resuming:
         start, best, history, best_state, first, learned_from = restore(
             out, run, model, optimizer, scheduler, ema, head)  # fmt: skip
         init_from = first if first not in (None, "random") else init_from
     if learned_from is None:
-        learned_from = ancestry(init_from, teacher if teacher is not None else run.distill_from)
+        learned_from = ancestry(init_ckpt if init_ckpt is not None else init_from,
+                                teacher if teacher is not None else run.distill_from)  # fmt: skip
     check_stop_epoch(stop_after_epoch, start, run.train.epochs, None if out is None else out / LAST)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

@@ -160,17 +160,12 @@ class Runner:
 def measure(model, test, task: str, size: tuple[int, int], runs: int) -> dict:
     """Test metrics of the fast CPU path (``fast_inference``; bf16 kept only if the accuracy
     stays within 0.5 points of eval mode) and CPU ms/image of eval mode and the fast path."""
-    from learn.evaluate import evaluate_tensors
+    from learn.evaluate import evaluate_tensors, scored_fast_path
     from learn.fastpath import cpu_ms_per_image, fast_inference
 
     n_cls = model.num_classes
-    fast = fast_inference(model, check=test.x[:64])
-    res = evaluate_tensors(fast, test, n_cls)
-    if task == "classify":
-        ref = evaluate_tensors(model, test, n_cls).metrics["accuracy"]
-        if abs(res.metrics["accuracy"] - ref) > 0.005:
-            fast = fast_inference(model, bf16=False)
-            res = evaluate_tensors(fast, test, n_cls)
+    ref = evaluate_tensors(model, test, n_cls).metrics["accuracy"] if task == "classify" else None
+    fast, res = scored_fast_path(lambda **kw: fast_inference(model, **kw), test, n_cls, ref)
     key = "accuracy" if task == "classify" else "mean_iou"
     return {"metrics": res.metrics, "score": res.metrics[key], "cm": res.cm.tolist(),
             "n_test": len(test.y), "bf16": bool(getattr(fast, "bf16", False)),

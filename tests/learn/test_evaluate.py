@@ -1,6 +1,6 @@
-"""Evaluation: metrics of a known prediction against hand computations, the fast inference path
-keeps predictions, checkpoint evaluation and the markdown report beside the paper (VGG16 + SVM's
-row: test_vgg_svm.py)."""
+"""Evaluation: metrics of a known prediction against hand computations, checkpoint evaluation
+and the markdown report beside the paper (VGG16 + SVM's row: test_vgg_svm.py; the fast
+inference path: test_fastpath.py)."""
 
 from __future__ import annotations
 
@@ -15,14 +15,10 @@ from learn.eval_report import confusion_markdown, write_report
 from learn.evaluate import (
     evaluate_checkpoint,
     evaluate_tensors,
-    history_figure,
-    plot_history,
     read_test_split,
 )
 from learn.experiments import paper
-from learn.fastpath import clear_disagreements, fast_inference
 from learn.folder import TensorData
-from learn.models import create_model
 from tactile.dataset.reader import DatasetReader
 
 
@@ -62,76 +58,6 @@ def test_segmentation_metrics_by_hand():
     assert res.metrics["mean_accuracy"] == pytest.approx((1 / 2 + 1 + 0) / 3)
     assert res.metrics["mean_iou"] == pytest.approx((1 / 2 + 1 / 3 + 0) / 3)
     assert res.metrics["fw_iou"] == pytest.approx((2 * 1 / 2 + 1 * 1 / 3 + 0) / 4)
-
-
-@pytest.mark.parametrize("arch", ["handsnet", "segnet"])
-def test_fast_inference_keeps_predictions(arch):
-    torch.manual_seed(0)
-    kw = {"input_size": (32, 48)} if arch == "handsnet" else {"width": 0.125}
-    model = create_model(arch, **kw).eval()
-    x = torch.rand(4, 1, 32, 48)
-    fast = fast_inference(model)
-    with torch.no_grad():
-        agree = (fast(x).argmax(1) == model(x).argmax(1)).double().mean()
-    assert agree >= (1.0 if arch == "handsnet" else 0.999)
-    assert fast.num_classes == model.num_classes and fast.task == model.task
-
-
-class _Logits(nn.Module):
-    """Returns the given logits ``(N, C[, H, W])`` whatever the input."""
-
-    def __init__(self, logits: torch.Tensor) -> None:
-        super().__init__()
-        self.logits = logits
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.logits
-
-
-def test_clear_disagreements_leaves_out_near_ties():
-    # float reference b: image 0 clear (p 0.88 / 0.12), image 1 a near tie, image 2 clear
-    b = _Logits(torch.tensor([[2.0, 0.0], [0.0, 0.01], [0.0, 3.0]]))
-    a = _Logits(torch.tensor([[0.0, 2.0], [0.01, 0.0], [0.0, 3.0]]))  # flips images 0 and 1
-    assert clear_disagreements(a, b, torch.zeros(3), tie_gap=0.02) == 1
-    assert clear_disagreements(a, b, torch.zeros(3), tie_gap=0.0) == 2
-    assert clear_disagreements(a, b, torch.zeros(3), tie_gap=0.9) == 0  # 0.76 gap counts as a tie
-    seg = torch.zeros(1, 3, 2, 2)  # per pixel: one clear flip, one near-tie flip
-    seg[0, 0, 0, 0], seg[0, 1, 0, 1], seg[0, 2, 1, :] = 5.0, 5.0, 1.0
-    seg_a = seg.clone()
-    seg_a[0, :, 0, 0] = torch.tensor([0.0, 5.0, 0.0])
-    seg_a[0, :, 1, 0] = torch.tensor([0.0, 1.0, 1.001])
-    seg[0, :, 1, 0] = torch.tensor([0.0, 1.001, 1.0])
-    assert clear_disagreements(_Logits(seg_a), _Logits(seg), seg, tie_gap=0.02) == 1
-
-
-def test_bf16_turned_off_where_it_flips_a_clear_decision():
-    """Two output rows 0.3 % apart (bfloat16 keeps 8 bits: both round to 1.0): on an image of
-    1,000 ones float32 says class 1 by a logit of 3, bf16 ties and argmax says class 0."""
-    model = nn.Sequential(nn.Flatten(), nn.Linear(1000, 2, bias=False))
-    with torch.no_grad():
-        model[1].weight[0], model[1].weight[1] = 1.0, 1.003
-    x = torch.ones(1, 1, 25, 40)
-    assert model(x).argmax(1).item() == 1
-    assert not fast_inference(model, bf16=True, check=x).bf16
-    assert fast_inference(model, bf16=True, check=torch.zeros_like(x)).bf16  # a tie: kept
-
-
-def test_bf16_kept_over_a_near_tie():
-    """A HandsNet whose check image 0 is a near tie keeps bf16, and bf16 agrees with the
-    unprepared float model on every image the latter decides clearly."""
-    torch.manual_seed(0)
-    model = create_model("handsnet", input_size=(32, 48)).eval()
-    x = torch.rand(8, 1, 32, 48)
-    with torch.no_grad():  # make image 0 a near tie: its two logits 1e-4 apart
-        logits = model(x)
-        model.classifier[-1].bias += torch.tensor([0.0, float(logits[0, 0] - logits[0, 1]) + 1e-4])
-        ref = model(x).softmax(1)
-    assert abs(float(ref[0, 1] - ref[0, 0])) < 1e-3
-    fast = fast_inference(model, bf16=True, check=x)
-    assert fast.bf16
-    with torch.no_grad():
-        agree = fast(x).argmax(1) == ref.argmax(1)
-    assert bool(agree[(ref[:, 1] - ref[:, 0]).abs() >= 0.02].all())
 
 
 def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
@@ -233,18 +159,6 @@ def test_report_of_one_task_states_the_other_tasks_paper_values(checkpoints, tin
         assert all(f"{v:.2f}" in line for v in values), line
         assert not any(a in text for a in absent)  # no rows for the task nothing was run of
         assert listed in text  # the scored task still lists the paper's other methods
-
-
-def test_plot_history(tmp_path):
-    hist = [{"epoch": 1, "train_loss": 1.0, "val_loss": 0.9, "val_metric": 0.6},
-            {"epoch": 2, "train_loss": 0.5, "val_loss": 0.7, "val_metric": 0.8}]  # fmt: skip
-    assert plot_history(hist, tmp_path / "c.png").stat().st_size > 1000
-    metric_ax = history_figure(hist, best_epoch=2).axes[1]
-    (star,) = [line for line in metric_ax.get_lines() if line.get_label().startswith("best.pt")]
-    assert list(star.get_xdata()) == [2] and list(star.get_ydata()) == [0.8]
-    assert "epoch 2, 0.8000" in star.get_label()
-    unmarked = history_figure(hist).axes[1]  # no best epoch given (or none validated): no star
-    assert not any(line.get_label().startswith("best.pt") for line in unmarked.get_lines())
 
 
 def _model_and_test_split(ckpt_path, data):

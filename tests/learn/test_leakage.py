@@ -165,6 +165,32 @@ def test_a_model_started_from_a_leaky_checkpoint_is_flagged(tiny_dataset, tiny_r
     assert row2["shared_with_training"]["test_samples"] == expected  # the grandparent's data
 
 
+def test_the_train_command_reads_its_init_checkpoint_once(tiny_dataset, checkpoints, tmp_path,
+                                                           monkeypatch):
+    """--init is checked before the data load; fit reuses that checkpoint for its weights and its
+    lineage rather than reading the file again (it was read three times)."""
+    import torch
+    import typer
+    from typer.testing import CliRunner
+
+    from learn.cli import register
+
+    reads, load = [], torch.load
+    monkeypatch.setattr(torch, "load", lambda f, *a, **k: reads.append(str(f)) or load(f, *a, **k))
+    app = typer.Typer()
+    register(app)
+    config = tmp_path / "run.toml"
+    config.write_text("threads = 1\n[model]\ninput_size = [32, 48]\n[train]\nepochs = 1\n")
+    res = CliRunner().invoke(app, ["train", str(tiny_dataset), "--config", str(config),
+                                   "--no-progress", "--out", str(tmp_path / "ft"),
+                                   "--init", str(checkpoints["handsnet"])])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert reads.count(str(checkpoints["handsnet"])) == 1, reads
+    ft = load(tmp_path / "ft" / "best.pt", weights_only=False)
+    assert ft["init"] == str(checkpoints["handsnet"])
+    assert ft["ancestry"] == [load(checkpoints["handsnet"], weights_only=False)["data"]]
+
+
 def test_init_loading_nothing_is_refused_and_a_vgg_encoder_loads(tiny_dataset, tiny_run,
                                                                  checkpoints, tmp_path):
     import pytest
@@ -177,7 +203,8 @@ def test_init_loading_nothing_is_refused_and_a_vgg_encoder_loads(tiny_dataset, t
         check_init(tiny_run("segnet"), checkpoints["handsnet"], tiny_dataset)
     vgg = tiny_run("vgg16", epochs=1)
     fit(vgg, load_data(tiny_dataset, vgg), tmp_path / "vgg", progress=False)
-    got = check_init(tiny_run("segnet"), tmp_path / "vgg" / "best.pt", tiny_dataset)
+    got, ckpt = check_init(tiny_run("segnet"), tmp_path / "vgg" / "best.pt", tiny_dataset)
+    assert ckpt["config"]["model"]["arch"] == "vgg16"
     assert got.loaded and all(k.startswith("encoder.") for k in got.loaded)
     assert "decoder" in got.summary() and "encoder" not in got.summary().split(";")[1]
 
