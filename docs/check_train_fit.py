@@ -1,4 +1,5 @@
-"""Does a classifier fit its own training images? Accuracy on train, validation and test.
+"""Does a network fit its own training images? Accuracy (classifiers) or mean IoU (segmenters)
+on train, validation and test.
 
     python docs/check_train_fit.py DATASET CHECKPOINT [CHECKPOINT ...] [--tta]
 
@@ -6,9 +7,10 @@ For each checkpoint (``handskin train``'s best.pt) the dataset is split as its r
 (the run's seed and validation share: the training images are the ones it learned from), and
 the network scores every image of each part in eval mode (no dropout, batch-norm statistics
 frozen), in the original view, or with ``--tta`` averaged over the paper's three views
-(`learn.tta`). A network whose training accuracy sits near its test accuracy underfits: more
-data or a better teacher cannot lift it beyond what it can fit. For a checkpoint trained with a
-teacher (``distill_from``), the teacher is scored too.
+(`learn.tta`); a segmenter's mean IoU is over each part's pixels pooled (`learn.metrics`, as
+``handskin evaluate`` scores). A network whose training score sits near its test score
+underfits: more data or a better teacher cannot lift it beyond what it can fit. For a
+checkpoint trained with a teacher (``distill_from``), the teacher is scored too.
 """
 
 from __future__ import annotations
@@ -19,15 +21,9 @@ from pathlib import Path
 import torch
 
 from learn.checkpoint import load_checkpoint, model_from_checkpoint
+from learn.evaluate import evaluate_tensors
 from learn.train import load_data
 from learn.tta import PAPER_VIEWS, FlipTTA
-
-
-@torch.no_grad()
-def accuracy(model: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, batch: int = 256) -> float:
-    """Share (0-1) of images ``x`` (S, 1, h, w) whose argmax is their class ``y`` (S,)."""
-    pred = torch.cat([model(x[i : i + batch]).argmax(1) for i in range(0, len(x), batch)])
-    return float((pred == y).float().mean())
 
 
 def main() -> None:
@@ -37,7 +33,7 @@ def main() -> None:
     ap.add_argument("--tta", action="store_true", help="average over the paper's three views")
     args = ap.parse_args()
     torch.set_num_threads(2)
-    print("| network | train | validation | test |\n|---|---|---|---|")
+    print("| network | score | train | validation | test |\n|---|---|---|---|---|")
     for path in args.checkpoints:
         model, run = model_from_checkpoint(load_checkpoint(path))
         data = load_data(args.data, run, progress=False)
@@ -47,8 +43,10 @@ def main() -> None:
                          model_from_checkpoint(load_checkpoint(run.distill_from))[0]))
         for name, net in nets:
             net = FlipTTA(net.eval(), PAPER_VIEWS) if args.tta else net.eval()
-            cells = [accuracy(net, part.x, part.y) for part in (data.train, data.val, data.test)]
-            print(f"| {name} | " + " | ".join(f"{100 * c:.2f} %" for c in cells) + " |")
+            key = "accuracy" if run.task == "classify" else "mean_iou"
+            cells = [evaluate_tensors(net, part, run.model.num_classes).metrics[key]
+                     for part in (data.train, data.val, data.test)]  # fmt: skip
+            print(f"| {name} | {key} | " + " | ".join(f"{100 * c:.2f} %" for c in cells) + " |")
 
 
 if __name__ == "__main__":
