@@ -42,8 +42,7 @@ def resolve_run(arch: str, config: Path | None, overrides: dict, test_c: bool):
     if arch not in PRESETS:
         raise ConfigError(f"unknown arch {arch!r}; choose one of: "
                           f"{', '.join(PRESETS + CLASSICAL)}")  # fmt: skip
-    preset = {"handsnet": C.HANDSNET, "vgg16": C.VGG16_FINETUNE, "segnet": C.SEGNET,
-              "fcn16s": C.FCN16S}[arch]  # fmt: skip
+    preset = C.PRESET_OF_ARCH[arch]
     run = RunConfig(model=preset.model, train=C.FINETUNE_TEST_C if test_c else preset.train)
     run = load_run_config(config, run) if config is not None else run
     top = {k: overrides[k] for k in RUN_KEYS if overrides.get(k) is not None}

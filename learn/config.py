@@ -178,6 +178,9 @@ FCN16S = ExperimentConfig(
                 loss="weighted_ce"),
 )
 
+#: the preset of each network (``handskin train --arch``'s default configuration)
+PRESET_OF_ARCH = {"handsnet": HANDSNET, "vgg16": VGG16_FINETUNE, "segnet": SEGNET, "fcn16s": FCN16S}
+
 #: Fine-tuning of the paper's Test C: lr factor 0.1 on the first two convolutions, lr 0.01
 #: halved after 60 of 120 epochs, batch 128 (paper).
 FINETUNE_TEST_C = TrainConfig(

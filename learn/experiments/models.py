@@ -28,11 +28,10 @@ def preset_run(arch: str, *, device: str = "cpu", **train_changes: object):
     from learn import config as C
     from learn.train import RunConfig, replace_train
 
-    presets = {"handsnet": C.HANDSNET, "vgg16": C.VGG16_FINETUNE, "segnet": C.SEGNET,
-               "fcn16s": C.FCN16S}  # fmt: skip
-    if arch not in presets:
-        raise ConfigError(f"unknown arch {arch!r}; choose one of: {', '.join(presets)}")
-    run = RunConfig(model=presets[arch].model, train=presets[arch].train, device=device)
+    if arch not in C.PRESET_OF_ARCH:
+        raise ConfigError(f"unknown arch {arch!r}; choose one of: {', '.join(C.PRESET_OF_ARCH)}")
+    preset = C.PRESET_OF_ARCH[arch]
+    run = RunConfig(model=preset.model, train=preset.train, device=device)
     changes = {k: v for k, v in train_changes.items() if v is not None}
     return replace_train(run, **changes) if changes else run
 

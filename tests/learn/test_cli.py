@@ -146,3 +146,12 @@ def test_errors_before_work(app, tiny_dataset, tmp_path, args, message):
     assert res.exit_code == 2 and message in res.output, res.output
     assert not (tmp_path / "out").exists()  # nothing written
     assert bad.read_text() == "[train]\nlearning_rate = 0.1\n"  # nor overwritten
+
+
+def test_the_cli_names_every_preset_and_classical_baseline():
+    """The CLI's lists (kept import-free so --help stays fast) match the modules they mirror."""
+    from learn import cli
+    from learn.classical import CLASSICAL
+    from learn.config import PRESET_OF_ARCH
+
+    assert cli.PRESETS == tuple(PRESET_OF_ARCH) and cli.CLASSICAL == tuple(CLASSICAL)
