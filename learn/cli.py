@@ -138,10 +138,14 @@ StopOpt = _opt(int | None, "Stop once this epoch (1-based, counted from the run'
 GridOpt = _opt(str | None, "Cross-validate first over a grid, e.g. "
                "'train.lr=0.01,0.001;train.batch_size=32,64' (each value in its field's unit).")
 FoldsOpt = _opt(int, "Folds of the cross-validation (count).")
-PretrainOpt = _opt(bool, "segnet / fcn16s on a handskin dataset: first train a vgg16 hand / "
-                   "non-hand classifier of the same width and seed on the same training images "
-                   "into OUT/vgg16 (20 epochs, lr x 0.2 after 14; 6.2 min on 2 cores for the "
-                   "paper-sized set; reused when there) and start from its encoder.")
+PretrainOpt = _opt(bool | None, "segnet / fcn16s on a handskin dataset: first train a vgg16 "
+                   "hand / non-hand classifier of the same width and seed on the same training "
+                   "images into OUT/vgg16 (20 epochs, lr x 0.2 after 14; 6.2 min on 2 cores for "
+                   "the paper-sized set; reused when there) and start from its encoder, as the "
+                   "paper's segmenters start from a pretrained VGG16. Default: on for a "
+                   "segmenter on a handskin dataset without --init or --cv-grid; "
+                   "--no-pretrain-encoder trains from scratch.",
+                   "--pretrain-encoder/--no-pretrain-encoder")
 ProgressOpt = _opt(bool, "Show progress bars.")
 
 
@@ -166,7 +170,7 @@ def train_command(
     stop_after_epoch: StopOpt = None,
     cv_grid: GridOpt = None,
     cv_folds: FoldsOpt = 5,
-    pretrain_encoder: PretrainOpt = False,
+    pretrain_encoder: PretrainOpt = None,
     progress: ProgressOpt = True,
 ) -> None:
     """Train a model; best.pt / last.pt, curves.png, run.toml and test_metrics.json in OUT."""
@@ -201,7 +205,7 @@ def train_command(
 
 
 def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress,
-           pretrain=False) -> None:  # fmt: skip
+           pretrain: bool | None = None) -> None:  # fmt: skip
     from learn.checkpoint import check_no_overwrite, versions
     from learn.crossval import cross_validate, cv_markdown, parse_grid
     from learn.evaluate import evaluate_tensors
@@ -220,10 +224,11 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
                               "validation people, so the folds would not be held out. Fix: "
                               "cross-validate without the teacher, then distil the pick")
         teacher = check_teacher(run, data)
-    if pretrain:
-        from learn.encoder_start import check_pretrain
+    from learn.encoder_start import check_pretrain, wanted
 
-        check_pretrain(run, data, init, cv_grid)
+    pretrain = wanted(pretrain, run, data, init, cv_grid, out, resume)
+    if pretrain:
+        check_pretrain(run, data, init, cv_grid, out, resume)
     init_ckpt = None
     if init is not None:
         loads, init_ckpt = check_init(run, init, data)
@@ -238,7 +243,8 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
 
         init = pretrain_encoder(run, data, out, progress)
         loads, init_ckpt = check_init(run, init, data)
-        typer.echo(f"--pretrain-encoder, {init}: {loads.summary()}")
+        typer.echo(f"{run.model.arch} starts from the encoder of the classifier {init} "
+                   f"({loads.summary()}; --no-pretrain-encoder trains from scratch)")
     grid = parse_grid(cv_grid) if cv_grid else None
     if grid:
         cv = cross_validate(run, data, grid, k=cv_folds, hand_classes=hand)

@@ -13,7 +13,8 @@ it lifted SegNet w0.25 by +2.5 to +7.8 mIoU points over the same seed from scrat
 The classifier is the vgg16 preset at the segmenter's width, input size, canvas, seed, number
 format and device, with that study's schedule: 20 epochs, lr x 0.2 after 14 (6.2 min on 2
 cores for the paper-sized set). It is trained into ``OUT/vgg16``; a finished one there is
-reused and a stopped one resumed (`learn.experiments.models.train_once`).
+reused and a stopped one resumed (`learn.experiments.models.train_once`). ``handskin train``
+does this by default for a segmenter on a handskin dataset (:func:`wanted`).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
+from learn.checkpoint import BEST, LAST, load_checkpoint
 from tactile.errors import ConfigError
 
 #: the classifier's schedule (epochs, lr drop period in epochs), as measured in docs/learning.md
@@ -42,10 +44,36 @@ def encoder_run(run):
                                rot180=run.rot180, threads=run.threads, precision=run.precision)
 
 
-def check_pretrain(run, data: str | Path, init: Path | None, cv_grid: str | None) -> None:
+def wanted(flag: bool | None, run, data: str | Path, init: Path | None, cv_grid: str | None,
+           out: Path, resume: bool) -> bool:  # fmt: skip
+    """Whether ``handskin train`` starts ``run`` from a classifier's encoder: ``flag``
+    (``--pretrain-encoder`` / ``--no-pretrain-encoder``) when given; by default yes for a
+    segmenter on a handskin dataset without ``--init`` or ``--cv-grid``, and when resuming, as
+    the run in ``out`` started."""
+    from learn.folder import is_dataset
+
+    if flag is not None:
+        return flag
+    if run.task != "segment" or init is not None or cv_grid or not is_dataset(data):
+        return False
+    return _started(out, resume) in (None, True)
+
+
+def _started(out: Path, resume: bool) -> bool | None:
+    """For ``--resume`` of a run in ``out``: whether it started from ``out/vgg16``'s encoder
+    (None when there is no run to resume)."""
+    last = Path(out) / LAST
+    if not (resume and last.is_file()):
+        return None
+    return load_checkpoint(last).get("init") == str(Path(out) / FOLDER / BEST)
+
+
+def check_pretrain(run, data: str | Path, init: Path | None, cv_grid: str | None,
+                   out: Path | None = None, resume: bool = False) -> None:  # fmt: skip
     """ConfigError, before any work, when ``--pretrain-encoder`` cannot apply: a classifier run,
     a start given with ``--init`` too, an image folder (no non-hand images to learn the
-    classifier from), or a cross-validation (the classifier sees every fold's people)."""
+    classifier from), a cross-validation (the classifier sees every fold's people), or a
+    ``--resume`` of a run in ``out`` that started otherwise."""
     from learn.folder import is_dataset
 
     if run.task != "segment":
@@ -62,6 +90,9 @@ def check_pretrain(run, data: str | Path, init: Path | None, cv_grid: str | None
         raise ConfigError("--pretrain-encoder with --cv-grid: the classifier trained on every "
                           "fold's validation people, so the folds would not be held out. Fix: "
                           "cross-validate from scratch, then train the pick with the encoder")
+    if out is not None and _started(out, resume) is False:
+        raise ConfigError(f"--resume: the run in {out} did not start from {out / FOLDER}'s "
+                          "encoder. Fix: resume it with --no-pretrain-encoder")
 
 
 def pretrain_encoder(run, data: str | Path, out: Path, progress: bool = True) -> Path:
