@@ -239,12 +239,13 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
     check_stop(stop, run, out, resume)
     check_no_overwrite(out, resume)
     if pretrain:  # the checks above passed: now the classifier, then its encoder as the start
-        from learn.encoder_start import pretrain_encoder
+        from learn.encoder_start import FOLDER, pretrain_encoder
 
+        typer.echo(f"{run.model.arch}: first a vgg16 classifier in {out / FOLDER}, whose encoder "
+                   "starts it (--no-pretrain-encoder: from scratch)")
         init = pretrain_encoder(run, data, out, progress)
         loads, init_ckpt = check_init(run, init, data)
-        typer.echo(f"{run.model.arch} starts from the encoder of the classifier {init} "
-                   f"({loads.summary()}; --no-pretrain-encoder trains from scratch)")
+        typer.echo(f"{run.model.arch} starts from the encoder of {init}: {loads.summary()}")
     grid = parse_grid(cv_grid) if cv_grid else None
     if grid:
         cv = cross_validate(run, data, grid, k=cv_folds, hand_classes=hand)

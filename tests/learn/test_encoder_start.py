@@ -44,6 +44,7 @@ def test_the_segmenter_starts_from_the_classifier_trained_first(tiny_dataset, tm
     assert vgg["config"]["train"]["epochs"] == 20 and vgg["data"]["path"] == str(tiny_dataset)
     assert seg["init"] == str(out / "vgg16" / "best.pt")
     said = " ".join(res.output.split())  # the console wraps long lines
+    assert f"segnet: first a vgg16 classifier in {out / 'vgg16'}" in said
     assert "78 of 152 tensors loaded; classifier, decoder start fresh" in said
     # the first convolution stays one epoch from the classifier's; a twin from scratch does not
     res = _train([tiny_dataset, "--out", tmp_path / "scratch", "--arch", "segnet", "--config",
