@@ -120,7 +120,7 @@ HandOpt = _opt(str | None, "Image folders: comma-separated folder names that are
                "(e.g. hand,finger); default: every folder its own class.")
 InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file): the tensors whose names "
                "and shapes fit load, the rest start fresh; segnet / fcn16s: a vgg16 classifier "
-               "of the same width lends its encoder (+2.5 to +7.8 mIoU points on the paper-sized "
+               "of the same width lends its encoder (+2.5 to +7.9 mIoU points on the paper-sized "
                "set, docs/learning.md); vgg_svm: the vgg16 checkpoint whose features feed the SVM.")
 DistillOpt = _opt(Path | None, "Distil from this trained classifier (.pt file, e.g. a vgg16 "
                   "best.pt of the same data): the network also learns its flip-averaged "
@@ -228,7 +228,7 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
 
     pretrain = wanted(pretrain, run, data, init, cv_grid, out, resume)
     if pretrain:
-        check_pretrain(run, data, init, cv_grid, out, resume)
+        check_pretrain(run, data, init, cv_grid)
     init_ckpt = None
     if init is not None:
         loads, init_ckpt = check_init(run, init, data)
