@@ -370,9 +370,10 @@ def shared_with_training(models: Mapping | Sequence[Mapping] | None, data_path: 
     """``learn.leakage.shared_groups`` of the data a model learned from (its checkpoint dict or
     classical model ``meta``: its ``data`` and ``ancestry``, `learn.leakage.lineage`; pooled over
     an ensemble's list of them) and the data it is scored on (``among``: the dataset indices of
-    the samples scored; default its test split); None when unknown or impossible."""
+    the samples scored; default its test split), its own split checked too when it learned from
+    ``data_path`` itself; None when unknown or impossible."""
     from learn.leakage import lineage, shared_groups
 
     many = [models] if models is None or isinstance(models, Mapping) else list(models)
     paths = [r["path"] for m in many for r in lineage(m)]
-    return shared_groups(paths, data_path, among) if paths else None
+    return shared_groups(paths, data_path, among, own_split=True) if paths else None

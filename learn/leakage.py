@@ -73,41 +73,53 @@ def _seen(a: Path, b: Path) -> list[set] | None:
 
 
 def shared_groups(train_data: str | Path | Sequence[str | Path], test_data: str | Path,
-                  among: np.ndarray | None = None) -> dict | None:  # fmt: skip
+                  among: np.ndarray | None = None, *,
+                  own_split: bool = False) -> dict | None:  # fmt: skip
     """Subjects and object instances of ``train_data``'s train split (of each, for several
     datasets: a model's :func:`lineage`) that are in ``test_data``'s test split, when the two are
     different datasets that can share them: subjects when both were drawn from one subject pool
     (the same seed and subject count, any part or size), instances when both come from the
     generator (any seed) or share a subject pool. None when that cannot happen for any of them
-    (the same folder: its split is disjoint by construction; other pools) or cannot be told (a
-    folder missing, or one without a manifest, e.g. ingested real data).
+    (the same folder, unless ``own_split``: handskin's splits are disjoint by construction;
+    other pools) or cannot be told (a folder missing, or one without a manifest, e.g. ingested
+    real data).
 
     ``among``: the dataset indices of the test samples scored (a segmenter's: the hands), by
-    default the whole test split. Returns ``{"subjects": [...], "instances": [...],
-    "test_samples": int, "n_test": int}``: the shared ids and how many of the ``n_test`` test
-    samples carry one.
+    default the whole test split. ``own_split``: when ``test_data`` is itself among
+    ``train_data``, also check its own split, which a split by sample breaks (handskin's
+    splits never share a person; ``docs/resplit_by_sample.py`` makes such a copy on purpose, and
+    a split edited by hand may). Returns ``{"subjects": [...], "instances": [...],
+    "test_samples": int, "n_test": int, "own_split_samples": int}``: the shared ids, how many
+    of the ``n_test`` test samples carry one, and how many share one with ``test_data``'s own
+    train split (0 without ``own_split``).
     """
     many = [train_data] if isinstance(train_data, str | Path) else list(train_data)
     b = _folder(test_data)
     seen: list[set] = [set(), set()]  # subject and instance ids trained on, over the datasets
-    can_share = False
-    for a in {_folder(d).resolve(): _folder(d) for d in many}.values():
+    folders = {_folder(d).resolve(): _folder(d) for d in many}
+    own = own_split and is_dataset(b) and b.resolve() in folders
+    can_share = own
+    for a in folders.values():
         if (found := _seen(a, b)) is not None:
             can_share = True
             seen = [s | f for s, f in zip(seen, found, strict=True)]
     if not can_share:
         return None
+    fields = ("subject_id", "instance_id")
     with DatasetReader(b) as rb:
         test = rb.splits["test"] if among is None else np.asarray(among, dtype=np.int64)
-        ids = [_ids(rb, f)[test] for f in ("subject_id", "instance_id")]
-    hit = np.zeros(len(test), dtype=bool)
+        ids = [_ids(rb, f)[test] for f in fields]
+        mine_train = [set(_ids(rb, f)[rb.splits["train"]].tolist()) - {-1} if own else set()
+                      for f in fields]  # fmt: skip
+    hit, own_hit = np.zeros(len(test), dtype=bool), np.zeros(len(test), dtype=bool)
     shared = []
-    for known, mine in zip(seen, ids, strict=True):
-        both = sorted(known & (set(mine.tolist()) - {-1}))
+    for known, own_known, mine in zip(seen, mine_train, ids, strict=True):
+        both = sorted((known | own_known) & (set(mine.tolist()) - {-1}))
         shared.append(both)
         hit |= np.isin(mine, both)
+        own_hit |= np.isin(mine, sorted(own_known))
     return {"subjects": shared[0], "instances": shared[1], "test_samples": int(hit.sum()),
-            "n_test": len(test)}  # fmt: skip
+            "n_test": len(test), "own_split_samples": int(own_hit.sum())}  # fmt: skip
 
 
 def test_hands(data_path: str | Path) -> np.ndarray | None:
@@ -125,10 +137,17 @@ def leakage_note(shared: dict | None) -> str | None:
     """The report's warning for :func:`shared_groups`' result, None when nothing is shared."""
     if not shared or not shared["test_samples"]:
         return None
-    return (f"**Not held out**: {shared['test_samples']} of the {shared['n_test']} test samples "
+    head = (f"**Not held out**: {shared['test_samples']} of the {shared['n_test']} test samples "
             f"come from {len(shared['subjects'])} subjects and {len(shared['instances'])} object "
-            "instances this model was trained on, or a checkpoint it started from or learned "
-            "from (`learn.leakage.lineage`: those training datasets share people or objects "
+            "instances this model was trained on")
+    own = shared.get("own_split_samples", 0)
+    if own:
+        return (f"{head}: this dataset's own train and test splits share them ({own} test "
+                "samples), as a split by sample does (a copy from docs/resplit_by_sample.py, or "
+                "a split edited by hand). Fix: score it on a dataset split by person, as "
+                "handskin generate and ingest split them.")
+    return (f"{head}, or a checkpoint it started from or learned from "
+            "(`learn.leakage.lineage`: those training datasets share people or objects "
             "with this one but not its split). Fix: score it on its own dataset's test split, "
             "or generate them with --split keyed and one seed.")
 

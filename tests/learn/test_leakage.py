@@ -1,6 +1,7 @@
 """A model scored on another dataset of the same subject pool: the shared subjects and object
 instances are found (against sets built here from the ids), and the report says the scores are
-not held out; the same folder, or another pool, is never flagged."""
+not held out; another pool is never flagged, nor the same folder unless its own split shares
+people (a split by sample)."""
 
 from __future__ import annotations
 
@@ -89,7 +90,8 @@ def test_report_flags_scores_that_are_not_held_out(tiny_dataset, checkpoints, tm
         own_test = ds.splits["test"]
         train = ds.splits["train"]
     row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=2)
-    assert row["shared_with_training"] is None
+    own = row["shared_with_training"]  # its own split, checked: no person on both sides
+    assert own["test_samples"] == own["own_split_samples"] == 0 and own["n_test"] == len(own_test)
     clean = resplit(tiny_dataset, tmp_path / "clean", own_test)  # same split, other folder
     assert evaluate_checkpoint(checkpoints["handsnet"], clean,
                                time_runs=2)["shared_with_training"]["test_samples"] == 0
@@ -220,7 +222,8 @@ def test_a_segmenter_is_judged_on_the_hands_it_is_scored_on(tiny_dataset, checkp
     seg = evaluate_checkpoint(checkpoints["segnet"], mixed, time_runs=2)
     assert seg["n_test"] == int(is_hand[own_test].sum())
     assert seg["shared_with_training"] == {"subjects": [], "instances": [], "test_samples": 0,
-                                           "n_test": seg["n_test"]}  # fmt: skip
+                                           "n_test": seg["n_test"],
+                                           "own_split_samples": 0}  # fmt: skip
     cls = evaluate_checkpoint(checkpoints["handsnet"], mixed, time_runs=2)
     assert cls["shared_with_training"]["test_samples"] >= len(objects)
     # so does --init: a warning for the classifier, none for the segmenter
@@ -237,3 +240,27 @@ def test_a_segmenter_is_judged_on_the_hands_it_is_scored_on(tiny_dataset, checkp
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_init(make_run("segnet"), checkpoints["segnet"], mixed)
+
+
+def test_a_split_by_sample_is_flagged_on_its_own_data(tiny_dataset, tiny_run, tmp_path):
+    """A model trained and scored on one dataset whose test split holds samples of its training
+    people (docs/resplit_by_sample.py's copy): evaluation counts them from the raw ids and the
+    report names the dataset's own split; shared_groups without own_split stays silent."""
+    from learn.train import fit, load_data
+
+    with DatasetReader(tiny_dataset) as ds:
+        train, test = ds.splits["train"], ds.splits["test"]
+    mixed = np.sort(np.r_[test[::2], train[::3]])  # half its test people's, some of training's
+    copy = resplit(tiny_dataset, tmp_path / "bysample", mixed)
+    run = tiny_run("handsnet", epochs=1)
+    fit(run, load_data(copy, run), tmp_path / "m", progress=False)
+    row = evaluate_checkpoint(tmp_path / "m" / "best.pt", copy, time_runs=2)
+    n = len(train) + len(test)
+    expected = _expected_hits(tiny_dataset, [np.setdiff1d(np.arange(n), mixed)], mixed)
+    shared = row["shared_with_training"]
+    assert shared["test_samples"] == shared["own_split_samples"] == expected > 0
+    assert shared["n_test"] == len(mixed)
+    text = write_report([row], tmp_path / "r.md").read_text()
+    assert f"**Not held out**: {expected} of the {len(mixed)} test samples" in text
+    assert "own train and test splits share them" in text
+    assert shared_groups(copy, copy) is None

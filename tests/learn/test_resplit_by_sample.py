@@ -1,0 +1,75 @@
+"""docs/resplit_by_sample.py copies a dataset with a test split drawn by sample: as many hands and
+non-hands as the original test split, people shared with training, every other byte the
+same; the original is untouched and an existing target is refused."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tactile.dataset.reader import open_dataset
+
+
+def _script():
+    path = Path(__file__).resolve().parents[2] / "docs" / "resplit_by_sample.py"
+    spec = importlib.util.spec_from_file_location("resplit_by_sample", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _splits(folder: Path) -> tuple[np.ndarray, np.ndarray]:
+    with open_dataset(folder) as r:
+        return np.asarray(r.splits["train"]), np.asarray(r.splits["test"])
+
+
+def test_the_copy_holds_the_same_class_counts_drawn_by_sample(tiny_dataset, tmp_path):
+    before = (tiny_dataset / "dataset.h5").read_bytes()
+    train0, test0 = _splits(tiny_dataset)
+    with open_dataset(tiny_dataset) as r:
+        hand, subject = r["is_hand"][:].astype(bool), r["subject_id"][:]
+        images = r["image"][:]
+    counts = _script().resplit_by_sample(tiny_dataset, tmp_path / "copy", seed=3)
+    train, test = _splits(tmp_path / "copy")
+    assert (tiny_dataset / "dataset.h5").read_bytes() == before
+    np.testing.assert_array_equal(np.sort(np.concatenate([train, test])), np.arange(len(hand)))
+    assert hand[test].sum() == hand[test0].sum() and (~hand[test]).sum() == (~hand[test0]).sum()
+    assert counts["test_hands"] == hand[test].sum()
+    # the original split shares no person; this draw does, as the counts say
+    assert not set(subject[train0].tolist()) & set(subject[test0].tolist()) - {-1}
+    seen = set(subject[train][hand[train]].tolist())
+    shared = sum(s in seen for s in subject[test][hand[test]])
+    assert counts["test_hands_of_training_people"] == shared
+    assert counts["test_hands_of_training_people"] > 0
+    with open_dataset(tmp_path / "copy") as r:
+        np.testing.assert_array_equal(r["image"][:], images)
+    # the same seed draws the same split; another seed another
+    _script().resplit_by_sample(tiny_dataset, tmp_path / "again", seed=3)
+    np.testing.assert_array_equal(_splits(tmp_path / "again")[1], test)
+    _script().resplit_by_sample(tiny_dataset, tmp_path / "other", seed=4)
+    assert not np.array_equal(_splits(tmp_path / "other")[1], test)
+
+
+def test_an_existing_target_is_refused_untouched(tiny_dataset, tmp_path):
+    target = tmp_path / "taken"
+    target.mkdir()
+    (target / "keep.txt").write_text("mine")
+    with pytest.raises(SystemExit, match="exists"):
+        _script().resplit_by_sample(tiny_dataset, target)
+    assert (target / "keep.txt").read_text() == "mine"
+    with pytest.raises(SystemExit, match=r"no dataset\.h5"):
+        _script().resplit_by_sample(tmp_path / "nothing", tmp_path / "new")
+    assert not (tmp_path / "new").exists()
+
+
+def test_training_reads_the_new_split(tiny_dataset, tmp_path):
+    from learn.folder import open_split
+
+    _script().resplit_by_sample(tiny_dataset, tmp_path / "copy", seed=0)
+    _, test = _splits(tmp_path / "copy")
+    ds = open_split(tmp_path / "copy", "test", "classify", (12, 18), None, 0, None)
+    np.testing.assert_array_equal(np.sort(np.asarray(ds.indices)), test)
+    assert not np.array_equal(test, _splits(tiny_dataset)[1])
