@@ -210,6 +210,7 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
     from learn.crossval import cross_validate, cv_markdown, parse_grid
     from learn.evaluate import evaluate_tensors
     from learn.finetune import check_init
+    from learn.leakage import own_split_note, test_hands
     from learn.run_state import check_stop
     from learn.train import check_precision, fit, load_data
     from tactile.config import to_dict
@@ -238,6 +239,8 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
                           "--resume. Fix: cross-validate first, then train the pick in parts")
     check_stop(stop, run, out, resume)
     check_no_overwrite(out, resume)
+    if note := own_split_note(data, test_hands(data) if run.task == "segment" else None):
+        typer.echo(f"warning: {note}", err=True)
     if pretrain:  # the checks above passed: now the classifier, then its encoder as the start
         from learn.encoder_start import FOLDER, pretrain_encoder
 

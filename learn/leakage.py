@@ -152,6 +152,20 @@ def leakage_note(shared: dict | None) -> str | None:
             "or generate them with --split keyed and one seed.")
 
 
+def own_split_note(data_path: str | Path, among: np.ndarray | None = None) -> str | None:
+    """A warning for ``handskin train`` when ``data_path``'s own test split (``among``: the test
+    samples that will be scored, e.g. a segmenter's hands) holds subjects or object instances of
+    its train split, as a split by sample does; None for a split by person and for image
+    folders."""
+    shared = shared_groups([data_path], data_path, among, own_split=True)
+    if not shared or not shared["own_split_samples"]:
+        return None
+    return (f"{shared['own_split_samples']} of the {shared['n_test']} test samples of "
+            f"{data_path} come from {len(shared['subjects'])} subjects and "
+            f"{len(shared['instances'])} object instances of its own train split (a split by "
+            "sample, not by person): this run's test scores will not be held out")
+
+
 def lineage(ckpt: Mapping | None) -> list[dict]:
     """The training-data records (``{"path": ..., ...}``) a model's weights learned from: its
     checkpoint's own ``data`` and its recorded ``ancestry`` (those of the checkpoint it started

@@ -264,3 +264,37 @@ def test_a_split_by_sample_is_flagged_on_its_own_data(tiny_dataset, tiny_run, tm
     assert f"**Not held out**: {expected} of the {len(mixed)} test samples" in text
     assert "own train and test splits share them" in text
     assert shared_groups(copy, copy) is None
+
+
+def test_training_on_a_split_by_sample_warns(tiny_dataset, tmp_path):
+    """`handskin train` says before training that a dataset's own split shares people (a
+    segmenter: among the test hands it will be scored on), and says nothing on a split by
+    person."""
+    import typer
+    from typer.testing import CliRunner
+
+    from learn.cli import register
+
+    app = typer.Typer()
+    register(app)
+    with DatasetReader(tiny_dataset) as ds:
+        train, test = ds.splits["train"], ds.splits["test"]
+        hand = ds.is_hand[:].astype(bool)
+    mixed = np.sort(np.r_[test[::2], train[::3]])
+    copy = resplit(tiny_dataset, tmp_path / "bysample", mixed)
+    config = tmp_path / "run.toml"
+    config.write_text("threads = 1\n[model]\ninput_size = [32, 48]\n[train]\nepochs = 1\n")
+    n = len(train) + len(test)
+    others = [np.setdiff1d(np.arange(n), mixed)]
+    for arch, scored, start in (("handsnet", mixed, []),
+                                ("segnet", mixed[hand[mixed]], ["--no-pretrain-encoder"])):
+        res = CliRunner().invoke(app, ["train", str(copy), "--out", str(tmp_path / arch),
+                                       "--arch", arch, "--config", str(config), "--no-progress",
+                                       *start])  # fmt: skip
+        assert res.exit_code == 0, res.output
+        expected = _expected_hits(tiny_dataset, others, scored)
+        assert f"warning: {expected} of the {len(scored)} test samples of {copy}" in res.stderr
+    res = CliRunner().invoke(app, ["train", str(tiny_dataset), "--out", str(tmp_path / "clean"),
+                                   "--config", str(config), "--no-progress"])  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "warning" not in res.stderr
