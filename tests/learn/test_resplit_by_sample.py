@@ -73,3 +73,16 @@ def test_training_reads_the_new_split(tiny_dataset, tmp_path):
     ds = open_split(tmp_path / "copy", "test", "classify", (12, 18), None, 0, None)
     np.testing.assert_array_equal(np.sort(np.asarray(ds.indices)), test)
     assert not np.array_equal(test, _splits(tiny_dataset)[1])
+
+
+def test_the_common_copy_tests_on_both_test_splits(tiny_dataset, tmp_path):
+    script = _script()
+    script.resplit_by_sample(tiny_dataset, tmp_path / "bysample", seed=1)
+    n = script.common_copy(tiny_dataset, tmp_path / "bysample", tmp_path / "common")
+    want = sorted(set(_splits(tiny_dataset)[1].tolist()) & set(_splits(tmp_path / "bysample")[1]
+                                                              .tolist()))  # fmt: skip
+    train, test = _splits(tmp_path / "common")
+    assert test.tolist() == want and n == len(want) > 0
+    assert sorted([*train.tolist(), *test.tolist()]) == list(range(len(train) + len(test)))
+    with pytest.raises(SystemExit, match="exists"):
+        script.common_copy(tiny_dataset, tmp_path / "bysample", tmp_path / "common")
