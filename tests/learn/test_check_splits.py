@@ -4,9 +4,7 @@ re-make the train split, with no person in both."""
 
 from __future__ import annotations
 
-import importlib.util
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -14,17 +12,9 @@ from learn.evaluate import evaluate_checkpoint
 from tactile.dataset.reader import open_dataset
 
 
-def _script():
-    path = Path(__file__).resolve().parents[2] / "docs" / "check_splits.py"
-    spec = importlib.util.spec_from_file_location("check_splits", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def test_check_splits_scores_the_splits_training_used(checkpoints, tiny_dataset, capsys,
-                                                      monkeypatch):  # fmt: skip
-    script = _script()
+def test_check_splits_scores_the_splits_training_used(doc_script, checkpoints, tiny_dataset,
+                                                      capsys, monkeypatch):  # fmt: skip
+    script = doc_script("check_splits")
     parts = script.split_predictions(checkpoints["handsnet"], tiny_dataset)
     row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=2, time_rounds=1)
     idx, right = parts["test"]

@@ -3,7 +3,6 @@ datasets the rows were scored on, checked against a loop over the fields read wi
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import h5py
@@ -16,16 +15,12 @@ from tactile.synthetic import cylinder_sector_layout
 
 from .conftest import N_HAND, N_OTHER, make_sample
 
-SCRIPT = Path(__file__).resolve().parents[2] / "docs" / "common_test_samples.py"
 N = N_HAND + N_OTHER
 
 
 @pytest.fixture(scope="module")
-def script():
-    spec = importlib.util.spec_from_file_location("common_test_samples", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def script(doc_script):
+    return doc_script("common_test_samples")
 
 
 def write(folder: Path, episode_seed) -> Path:

@@ -68,20 +68,14 @@ def test_flushing_nests_and_restores():
     assert kept()
 
 
-def test_check_script_counts_subnormals_from_bits():
+def test_check_script_counts_subnormals_from_bits(doc_script):
     """docs/check_subnormals.py counts what IEEE 754 calls subnormal, with the CPU's flush mode
     on (this process imported learn/, so float32 conversions here would zero them): against
     each value decoded from its fields by the standard's formula, in exact float64 arithmetic."""
-    import importlib.util
-    from pathlib import Path
-
     import numpy as np
     import torch
 
-    path = Path(__file__).resolve().parents[2] / "docs" / "check_subnormals.py"
-    spec = importlib.util.spec_from_file_location("check_subnormals", path)
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
+    script = doc_script("check_subnormals")
     # subnormal: the smallest, ~1e-38, a negative one, the largest; then 1.18e-38 (the smallest
     # normal), 1, +0, -0, inf, nan
     bits = [0x00000001, 0x006CE3EE, 0x80000100, 0x007FFFFF,

@@ -3,7 +3,6 @@ them (checked against the stored force and class) and refuses a dataset it canno
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import h5py
@@ -14,17 +13,13 @@ from sim.gen_config import load_generate_config
 from sim.generate import generate
 from tactile.dataset import open_dataset
 
-ROOT = Path(__file__).resolve().parents[2]
 SMALL = {"part": "plate", "n": 6, "chunk_size": 3, "n_subjects": 3, "instances_per_kind": 2,
          "duration_scale": 0.5, "seed": 11, "episode": {"max_attempts": 20}}  # fmt: skip
 
 
-def script():
-    spec = importlib.util.spec_from_file_location("check_sensed_share",
-                                                  ROOT / "docs" / "check_sensed_share.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+@pytest.fixture(scope="module")
+def script(doc_script):
+    return doc_script("check_sensed_share")
 
 
 @pytest.fixture(scope="module")
@@ -34,15 +29,15 @@ def plate_dataset(tmp_path_factory) -> Path:
     return out
 
 
-def test_resimulation_matches_the_dataset(plate_dataset):
-    hand, active, share, force = script().shares(plate_dataset, 10)  # n clipped to the 6 samples
+def test_resimulation_matches_the_dataset(script, plate_dataset):
+    hand, active, share, force = script.shares(plate_dataset, 10)  # n clipped to the 6 samples
     ds = open_dataset(plate_dataset)
     assert np.array_equal(hand, ds.is_hand[:].astype(bool))
     assert np.array_equal(np.float32(force), ds["force_n"][:])
     assert (active > 0).all() and np.isfinite(share).all() and (share >= 0).all()
 
 
-def test_a_dataset_it_cannot_reproduce_is_refused(plate_dataset, tmp_path):
+def test_a_dataset_it_cannot_reproduce_is_refused(script, plate_dataset, tmp_path):
     copy = tmp_path / "ds"
     copy.mkdir()
     for name in ("dataset.h5", "info.json", "manifest.json"):
@@ -50,15 +45,15 @@ def test_a_dataset_it_cannot_reproduce_is_refused(plate_dataset, tmp_path):
     with h5py.File(copy / "dataset.h5", "r+") as f:
         f["samples/force_n"][2] += 1.0
     with pytest.raises(SystemExit, match="differ from force_n"):
-        script().shares(copy, 6)
+        script.shares(copy, 6)
 
 
-def test_a_dataset_with_a_size_filter_is_reproduced(tmp_path):
+def test_a_dataset_with_a_size_filter_is_reproduced(script, tmp_path):
     """The redrawn attempts of `episode.min_active_taxels` are followed: every force matches."""
     out = tmp_path / "ds"
     cfg = SMALL | {"episode": {"max_attempts": 40, "min_active_taxels": 25}}
     generate(load_generate_config(None, **cfg), out, workers=1, progress=False)
     assert open_dataset(out).attrs["rejects"]["few_taxels"] > 0
-    _, active, _, force = script().shares(out, 6)
+    _, active, _, force = script.shares(out, 6)
     assert (active >= 25).all()
     assert np.array_equal(np.float32(force), open_dataset(out)["force_n"][:])
