@@ -111,6 +111,21 @@ def merge_classes(cm: ArrayLike, groups: list[list[int]]) -> torch.Tensor:
     return onehot.T @ cm @ onehot
 
 
+def without_true_class(cm: ArrayLike, c: int = 0) -> torch.Tensor:
+    """``cm`` with true class ``c``'s row zeroed: scores over the other classes' pixels only.
+
+    Class ``c`` is then absent from the ground truth, so Long et al.'s means skip it, while the
+    pixels of other classes predicted as ``c`` (column ``c``) stay errors. With ``c = 0`` this
+    scores a segmentation on the hand's pixels alone, as a labelling that leaves background
+    unlabelled (ignored) would: ``(C, C)`` int64.
+    """
+    cm = torch.as_tensor(np.asarray(cm), dtype=torch.int64).clone()
+    if not 0 <= c < cm.shape[0]:
+        raise DataError(f"class {c} is not in 0..{cm.shape[0] - 1}")
+    cm[c] = 0
+    return cm
+
+
 def segmentation_scores(cm: ArrayLike) -> dict[str, float]:
     """The four scores of Long et al. (fractions in [0, 1]) from one confusion matrix."""
     return {

@@ -72,8 +72,16 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     for needle in ("paper", *(f"{v:.2f}" for v in known), "unknown", "not run",
                    f"{100 * clf['metrics']['accuracy']:.2f}", "% of each true class",
                    "Accuracy by contact size", "mIoU (%) of coarser groupings",
-                   "mirror pairs merged"):
+                   "mirror pairs merged", "The same predictions on the hand's pixels"):
         assert needle in text, needle
+    # the hand-pixel table: the share of hand pixels, and the scores of the hand pixels alone
+    seg_cm = np.asarray(seg["cm"])
+    share = 100 * seg_cm[1:].sum() / seg_cm.sum()
+    assert f"The hand's pixels are {share:.2f} % of the test images' pixels" in text
+    hand_acc = 100 * np.trace(seg_cm[1:, 1:]) / seg_cm[1:].sum()
+    section = text.split("on the hand's pixels", 1)[1].split("\n## ", 1)[0]
+    (hand_row,) = [ln for ln in section.splitlines() if ln.startswith("| SegNet |")]
+    assert hand_row.startswith(f"| SegNet | {hand_acc:.2f} |"), hand_row
     # the size breakdown re-adds to the confusion matrix's diagonal, class by class
     per_bin = clf["by_active_taxels"]
     for c, name in enumerate(clf["class_names"]):

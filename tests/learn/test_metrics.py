@@ -20,6 +20,7 @@ from learn.metrics import (
     pixel_accuracy,
     segmentation_scores,
     time_per_image,
+    without_true_class,
 )
 from tactile.errors import DataError
 
@@ -113,3 +114,28 @@ def test_merged_classes_equal_relabelled_predictions():
     np.testing.assert_array_equal(merge_classes(cm, groups).numpy(), want)
     with pytest.raises(DataError, match="once"):
         merge_classes(cm, [[0, 1], [1, 2, 3, 4, 5, 6]])
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_scores_without_background_equal_scores_on_the_hand_pixels(seed):
+    """Zeroing the background's row scores the truth's hand pixels alone: Long et al.'s four
+    formulas written out on those pixels (a hand pixel predicted as background is wrong; a
+    background pixel predicted as a part counts nowhere), absent parts skipped."""
+    rng = np.random.default_rng(seed)
+    truth = np.where(rng.random(4000) < 0.7, 0, rng.choice([1, 2, 3, 4, 6], 4000))  # 5 absent
+    pred = np.where(rng.random(4000) < 0.5, truth, rng.integers(0, 7, 4000))
+    cm = confusion_matrix(torch.from_numpy(truth), torch.from_numpy(pred), 7)
+    got = segmentation_scores(without_true_class(cm))
+    hand = truth != 0
+    t, p = truth[hand], pred[hand]
+    parts = [c for c in range(1, 7) if (t == c).any()]
+    ious = {c: np.sum((t == c) & (p == c)) / np.sum((t == c) | (p == c)) for c in parts}
+    want = {"pixel_accuracy": np.mean(t == p),
+            "mean_accuracy": np.mean([np.mean(p[t == c] == c) for c in parts]),
+            "mean_iou": np.mean(list(ious.values())),
+            "fw_iou": sum(np.sum(t == c) * ious[c] for c in parts) / t.size}  # fmt: skip
+    for name, value in want.items():
+        assert got[name] == pytest.approx(value), name
+    assert cm[0].sum() > 0 and without_true_class(cm)[0].sum() == 0  # the input is untouched
+    with pytest.raises(DataError, match=r"0\.\.6"):
+        without_true_class(cm, 7)
