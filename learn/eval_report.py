@@ -156,8 +156,9 @@ def _table8_hand_pixels(rows: list[dict]) -> list[str]:
            "Scored on the pixels the truth labels as one of the six hand parts only (the "
            "background's pixels left out, a hand pixel predicted as background counted wrong): "
            "the scores of a labelling that marks the hand and leaves the rest unlabelled.", ""]
-    shares = {round(float(M.without_true_class(r["cm"]).sum() / max(sum(map(sum, r["cm"])), 1)),
-                    6) for r in ours.values()}  # fmt: skip
+    hand_cms = {n: M.without_true_class(r["cm"]) for n, r in ours.items()}
+    shares = {round(float(hand_cms[n].sum() / max(int(torch.tensor(r["cm"]).sum()), 1)), 6)
+              for n, r in ours.items()}  # fmt: skip
     if len(shares) == 1:
         hand = shares.pop()
         wrong = 1 - paper.SEGNET_ACC_PCT / 100
@@ -169,8 +170,8 @@ def _table8_hand_pixels(rows: list[dict]) -> list[str]:
                 "these the paper's Acc reads more like a score on the hand's pixels (or a "
                 "mean class accuracy) than a whole-image one.", ""]
     out += ["| method | Acc % | mAcc % | mIoU % | fwIoU % |", "|---|---|---|---|---|"]
-    for name, r in ours.items():
-        s = M.segmentation_scores(M.without_true_class(r["cm"]))
+    for name, cm in hand_cms.items():
+        s = M.segmentation_scores(cm)
         out.append(f"| {name} | " + " | ".join(_fmt(s[k], 100) for k in SEG_KEYS) + " |")
     return out
 
