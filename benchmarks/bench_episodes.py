@@ -56,8 +56,10 @@ def main(n: int = 100) -> None:
         rejects.update(sample_hand(i, 0, ctx, subjects)[1])
     total, wall = time.process_time() - t0, time.perf_counter() - w0
     sim = total - sum(TIMERS.values())
-    print(f"{n} samples in {total:.2f} s CPU: {n / total:.1f} labelled samples/s on one core "
-          f"(wall {wall:.2f} s: {n / wall:.1f}/s)")
+    print(
+        f"{n} samples in {total:.2f} s CPU: {n / total:.1f} labelled samples/s on one core "
+        f"(wall {wall:.2f} s: {n / wall:.1f}/s)"
+    )
     for name, sec in [("simulation (steps, controls, loop)", sim), *TIMERS.items()]:
         print(f"  {name:34s} {sec:6.2f} s  {100 * sec / total:5.1f} %")
     print(f"  rejects: {dict(rejects)}; frames read: 10 Hz over approach+load+hold")

@@ -31,9 +31,11 @@ def bench(n: int, part: str, workers: int) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         report = generate(cfg, Path(tmp) / "ds", workers=workers, progress=False)
     own, child = peak_rss_mib()
-    print(f"{part}, {n} samples, workers {workers}: {report.wall_s:6.1f} s wall, "
-          f"{report.samples_per_s:5.1f} samples/s; rejects {report.rejects}; peak RSS "
-          f"parent {own:.0f} MiB, largest worker {child:.0f} MiB (so far)")
+    print(
+        f"{part}, {n} samples, workers {workers}: {report.wall_s:6.1f} s wall, "
+        f"{report.samples_per_s:5.1f} samples/s; rejects {report.rejects}; peak RSS "
+        f"parent {own:.0f} MiB, largest worker {child:.0f} MiB (so far)"
+    )
 
 
 def main(argv: list[str]) -> None:

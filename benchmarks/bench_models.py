@@ -40,8 +40,9 @@ from learn.tta import PAPER_VIEWS, FlipTTA
 TARGET_MS_ONE_CORE = {"handsnet": 3.0, "segnet": 60.0}  # from the learning issue
 
 
-PRESET_WIDTH = {run.model.arch: run.model.width for run in (C.HANDSNET, C.VGG16_FINETUNE, C.SEGNET,
-                                                             C.FCN16S)}  # fmt: skip
+PRESET_WIDTH = {
+    run.model.arch: run.model.width for run in (C.HANDSNET, C.VGG16_FINETUNE, C.SEGNET, C.FCN16S)
+}
 
 
 def default_width(arch: str) -> float | None:
@@ -50,8 +51,9 @@ def default_width(arch: str) -> float | None:
     return None if param is None else param.default
 
 
-def timed(nets: list[nn.Module | None], size: tuple[int, int], runs: int, rounds: int,
-          threads: int) -> list[float]:  # fmt: skip
+def timed(
+    nets: list[nn.Module | None], size: tuple[int, int], runs: int, rounds: int, threads: int
+) -> list[float]:
     """ms / image of each network at ``threads`` threads (`learn.fastpath.interleaved_cpu_ms`:
     the least over ``rounds`` rounds of the median of ``runs`` runs, the networks taking turns
     within each round); NaN for None (not compiled)."""
@@ -68,8 +70,7 @@ def compiled_or_none(net: nn.Module, size: tuple[int, int], threads: int) -> nn.
         return None
 
 
-def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int,
-              rounds: int) -> str:  # fmt: skip
+def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int, rounds: int) -> str:
     """One printed row: arch, width, parameters, ms / image at 1 and 2 threads as built,
     prepared and compiled (and GPU)."""
     kw = {"input_size": size} if arch == "handsnet" else {"width": width}
@@ -86,31 +87,39 @@ def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int,
     target = TARGET_MS_ONE_CORE.get(arch)
     verdict = ""
     if target is not None:
-        best, path = min((cells[2], "prepared"), (cells[4], "compiled"),
-                         key=lambda c: c[0] if c[0] == c[0] else float("inf"))  # NaN: n/a
+        best, path = min(
+            (cells[2], "prepared"),
+            (cells[4], "compiled"),
+            key=lambda c: c[0] if c[0] == c[0] else float("inf"),
+        )  # NaN: n/a
         verdict = f"  target ≤ {target:g}: {'ok' if best <= target else 'MISSED'} ({path})"
     w = "fixed" if width is None else f"{width:g}"
     times = "".join(f"{c:9.2f}" if c == c else f"{'n/a':>9s}" for c in cells)
     return f"{arch:9s} {w:>6s} {count_parameters(model):>12,d}{times}{gpu}{verdict}"
 
 
-def bench_ensemble(size: tuple[int, int], runs: int, rounds: int,
-                   width: float = 0.25) -> list[str]:  # fmt: skip
+def bench_ensemble(size: tuple[int, int], runs: int, rounds: int, width: float = 0.25) -> list[str]:
     """Printed rows: SegNet + FCN-16s (mean softmax) at ``width``, prepared and compiled, 1 and
     2 threads, without and with test-time flips, against the SegNet target on one core."""
-    members = [prepare_for_inference(create_model(a, width=width).eval())
-               for a in ("segnet", "fcn16s")]  # fmt: skip
+    members = [
+        prepare_for_inference(create_model(a, width=width).eval()) for a in ("segnet", "fcn16s")
+    ]
     rows = []
-    for name, net in (("mean", MeanSoftmax(members)),
-                      ("mean+flips", MeanSoftmax([FlipTTA(m, PAPER_VIEWS) for m in members]))):
-        cells = {t: timed([net, compiled_or_none(net, size, t)], size, runs, rounds, t)
-                 for t in (1, 2)}  # fmt: skip
+    for name, net in (
+        ("mean", MeanSoftmax(members)),
+        ("mean+flips", MeanSoftmax([FlipTTA(m, PAPER_VIEWS) for m in members])),
+    ):
+        cells = {
+            t: timed([net, compiled_or_none(net, size, t)], size, runs, rounds, t) for t in (1, 2)
+        }
         target = TARGET_MS_ONE_CORE["segnet"]
         best = min(c for c in cells[1] if c == c)  # NaN: not compiled
-        rows.append(f"segnet+fcn16s {name:10s} w{width:g}: prep 1 {cells[1][0]:7.2f}, prep 2 "
-                    f"{cells[2][0]:7.2f}, comp 1 {cells[1][1]:7.2f}, comp 2 {cells[2][1]:7.2f}  "
-                    f"target ≤ {target:g}: {'ok' if best <= target else 'MISSED'} "
-                    f"({best / target:.2f} of it)")
+        rows.append(
+            f"segnet+fcn16s {name:10s} w{width:g}: prep 1 {cells[1][0]:7.2f}, prep 2 "
+            f"{cells[2][0]:7.2f}, comp 1 {cells[1][1]:7.2f}, comp 2 {cells[2][1]:7.2f}  "
+            f"target ≤ {target:g}: {'ok' if best <= target else 'MISSED'} "
+            f"({best / target:.2f} of it)"
+        )
     return rows
 
 
@@ -124,9 +133,11 @@ def bench_int8(size: tuple[int, int], runs: int, rounds: int) -> str:
     nets = [prepare_for_inference(model), quantize_int8(model, calib)]
     (f1, q1), (f2, q2) = (timed(nets, size, runs, rounds, t) for t in (1, 2))
     target = TARGET_MS_ONE_CORE["handsnet"]
-    return (f"handsnet float prep 1 {f1:7.2f}, prep 2 {f2:7.2f} | int8 1 {q1:7.2f}, int8 2 "
-            f"{q2:7.2f} | int8 {f1 / q1:.2f}x faster on 1 core, target ≤ {target:g}: "
-            f"{'ok' if q1 <= target else 'MISSED'}")
+    return (
+        f"handsnet float prep 1 {f1:7.2f}, prep 2 {f2:7.2f} | int8 1 {q1:7.2f}, int8 2 "
+        f"{q2:7.2f} | int8 {f1 / q1:.2f}x faster on 1 core, target ≤ {target:g}: "
+        f"{'ok' if q1 <= target else 'MISSED'}"
+    )
 
 
 def main() -> None:
@@ -134,15 +145,25 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=50, help="timed runs after 10 warm-up runs")
     parser.add_argument("--widths", type=float, nargs="*", default=[], help="extra widths")
     parser.add_argument("--size", type=int, nargs=2, default=(68, 100), help="H W in pixels")
-    parser.add_argument("--rounds", type=int, default=3,
-                        help="rounds of timing, paths taking turns; the least median is kept")
+    parser.add_argument(
+        "--rounds",
+        type=int,
+        default=3,
+        help="rounds of timing, paths taking turns; the least median is kept",
+    )
     args = parser.parse_args()
     size = tuple(args.size)
-    print(f"input 1 × 1 × {size[0]} × {size[1]}, batch 1, least over {args.rounds} rounds of "
-          f"the median of {args.runs} runs, torch {torch.__version__}")
+    print(
+        f"input 1 × 1 × {size[0]} × {size[1]}, batch 1, least over {args.rounds} rounds of "
+        f"the median of {args.runs} runs, torch {torch.__version__}"
+    )
     print("ms / image: as built, prepared, compiled (each 1 thread, 2 threads)")
-    print(f"{'model':9s} {'width':>6s} {'parameters':>12s}" + "".join(
-        f"{h:>9s}" for h in ("built 1", "built 2", "prep 1", "prep 2", "comp 1", "comp 2")))
+    print(
+        f"{'model':9s} {'width':>6s} {'parameters':>12s}"
+        + "".join(
+            f"{h:>9s}" for h in ("built 1", "built 2", "prep 1", "prep 2", "comp 1", "comp 2")
+        )
+    )
     for arch in MODELS:
         widths = [default_width(arch)]
         if widths[0] is not None:

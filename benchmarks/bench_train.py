@@ -31,8 +31,9 @@ from learn.train import PRECISIONS, build, make_loss, train_epoch, views_of
 HAND_SHARE = 1710 / 3530  # segmenters train on hand samples only (paper's class balance)
 
 
-def images_per_second(arch: str, n: int, threads: int, precision: str = "fp32",
-                      size: tuple[int, int] | None = None) -> tuple[float, object]:  # fmt: skip
+def images_per_second(
+    arch: str, n: int, threads: int, precision: str = "fp32", size: tuple[int, int] | None = None
+) -> tuple[float, object]:
     """Training images per second of ``arch``'s preset (input ``size`` (h, w) px if given): one
     ``learn.train.train_epoch`` (the real step: views, loss, optimizer) over ``n`` random sparse
     images in each of the preset's views, after a warm-up epoch over 64 of them; also returns
@@ -44,8 +45,11 @@ def images_per_second(arch: str, n: int, threads: int, precision: str = "fp32",
     h, w = run.model.input_size
     gen = torch.Generator().manual_seed(0)
     x = torch.rand(n, 1, h, w, generator=gen) * (torch.rand(n, 1, h, w, generator=gen) < 0.1)
-    y = (torch.randint(0, run.model.num_classes, (n, h, w), generator=gen)
-         if run.task == "segment" else torch.randint(0, 2, (n,), generator=gen))  # fmt: skip
+    y = (
+        torch.randint(0, run.model.num_classes, (n, h, w), generator=gen)
+        if run.task == "segment"
+        else torch.randint(0, 2, (n,), generator=gen)
+    )
     data = TensorData(x, y)
     model, optimizer, _ = build(run)
     loss_fn = make_loss(run, data)
@@ -57,15 +61,27 @@ def images_per_second(arch: str, n: int, threads: int, precision: str = "fp32",
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--images", type=int, default=320,
-                        help="timed samples, each in every view (count)")  # fmt: skip
+    parser.add_argument(
+        "--images", type=int, default=320, help="timed samples, each in every view (count)"
+    )
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads (count)")
     parser.add_argument("--train-images", type=int, default=2113, help="train samples (count)")
     parser.add_argument("--archs", nargs="+", default=["handsnet", "segnet", "fcn16s"])
-    parser.add_argument("--precision", nargs="+", default=["fp32"], choices=PRECISIONS,
-                        help="number formats of the forward pass to time (RunConfig.precision)")
-    parser.add_argument("--size", nargs=2, type=int, default=None, metavar=("H", "W"),
-                        help="input size (px) instead of the presets' 68 x 100")  # fmt: skip
+    parser.add_argument(
+        "--precision",
+        nargs="+",
+        default=["fp32"],
+        choices=PRECISIONS,
+        help="number formats of the forward pass to time (RunConfig.precision)",
+    )
+    parser.add_argument(
+        "--size",
+        nargs=2,
+        type=int,
+        default=None,
+        metavar=("H", "W"),
+        help="input size (px) instead of the presets' 68 x 100",
+    )
     args = parser.parse_args()
     precisions = [p for p in args.precision if p == "fp32" or bf16_supported()]
     if len(precisions) < len(args.precision):
@@ -74,16 +90,19 @@ def main() -> None:
     for arch in args.archs:
         rates = {}
         for precision in precisions:
-            rate, run = images_per_second(arch, args.images, args.threads, precision,
-                                          tuple(args.size) if args.size else None)  # fmt: skip
+            rate, run = images_per_second(
+                arch, args.images, args.threads, precision, tuple(args.size) if args.size else None
+            )
             rates[precision] = rate
             share = 1.0 if run.task == "classify" else HAND_SHARE
             epoch_s = args.train_images * share * len(views_of(run)) / rate
             total_min = epoch_s * run.train.epochs / 60
             note = " (target < 20 min)" if arch == "handsnet" else ""
             h, w = run.model.input_size
-            print(f"{arch:9s} {h}x{w} {precision} {rate:7.1f} img/s  {epoch_s:6.1f} s/epoch  "
-                  f"{run.train.epochs} epochs = {total_min:5.1f} min{note}")  # fmt: skip
+            print(
+                f"{arch:9s} {h}x{w} {precision} {rate:7.1f} img/s  {epoch_s:6.1f} s/epoch  "
+                f"{run.train.epochs} epochs = {total_min:5.1f} min{note}"
+            )
         if len(rates) == 2:
             print(f"{arch:9s} bf16 / fp32 speed: {rates['bf16'] / rates['fp32']:.2f} x")
 

@@ -51,8 +51,10 @@ def border_ratio(image: np.ndarray, labels: np.ndarray) -> float:
     """Mean grey on finger-finger borders over mean grey inside fingers (NaN: no border)."""
     finger = (labels >= 1) & (labels <= 5)
     border = np.zeros_like(finger)
-    for a, b in (((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
-                 ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):  # fmt: skip
+    for a, b in (
+        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+        ((slice(None, -1), slice(None)), (slice(1, None), slice(None))),
+    ):
         meet = finger[a] & finger[b] & (labels[a] != labels[b])
         border[a] |= meet
         border[b] |= meet
@@ -80,8 +82,10 @@ def main() -> None:
         net += shared_blob_pixels(x, resize_labels(labels, NET_SIZE))
         ratios.append(border_ratio(image, labels))
     print(f"{len(hands)} test hands of {args.data}")
-    print("finger pixels in a blob shared with another finger, %: map grid (1 mm) / "
-          f"{NET_SIZE[0]} x {NET_SIZE[1]} input")  # fmt: skip
+    print(
+        "finger pixels in a blob shared with another finger, %: map grid (1 mm) / "
+        f"{NET_SIZE[0]} x {NET_SIZE[1]} input"
+    )
     pct_grid = 100 * grid[1] / np.maximum(grid[0], 1)
     pct_net = 100 * net[1] / np.maximum(net[0], 1)
     for c in FINGERS:
@@ -89,9 +93,11 @@ def main() -> None:
     r = np.array(ratios)
     r = r[~np.isnan(r)]
     q1, med, q3 = np.percentile(r, [25, 50, 75])
-    print(f"border / inside-finger grey level, {r.size} images with a finger-finger border: "
-          f"median {med:.2f} (quartiles {q1:.2f}-{q3:.2f}); below 0.7 on "
-          f"{100 * np.mean(r < 0.7):.0f} % of images")  # fmt: skip
+    print(
+        f"border / inside-finger grey level, {r.size} images with a finger-finger border: "
+        f"median {med:.2f} (quartiles {q1:.2f}-{q3:.2f}); below 0.7 on "
+        f"{100 * np.mean(r < 0.7):.0f} % of images"
+    )
 
 
 if __name__ == "__main__":

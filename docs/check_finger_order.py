@@ -33,8 +33,9 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(2)
     model, run = model_from_checkpoint(load_checkpoint(args.checkpoint))
-    ds = TorchTactileDataset(args.data, split="test", task="segment", size=run.model.input_size,
-                             flips=False)  # fmt: skip
+    ds = TorchTactileDataset(
+        args.data, split="test", task="segment", size=run.model.input_size, flips=False
+    )
     test = materialize(ds, progress=False)
     pred = evaluate_tensors(model, test, 7, keep_predictions=True).predictions
     plain, best = torch.zeros(7, 7, dtype=torch.long), torch.zeros(7, 7, dtype=torch.long)
@@ -48,13 +49,17 @@ def main() -> None:
         reversed_better.append(flip)
         thumb.append(bool((y == 1).any()))
     rb, th = np.array(reversed_better), np.array(thumb)
-    print(f"{len(rb)} test hand images; reversed order scores better on {rb.mean():.1%} "
-          f"(thumb in the print: {rb[th].mean():.1%} of {th.sum()}; "
-          f"without: {rb[~th].mean():.1%} of {(~th).sum()})")
+    print(
+        f"{len(rb)} test hand images; reversed order scores better on {rb.mean():.1%} "
+        f"(thumb in the print: {rb[th].mean():.1%} of {th.sum()}; "
+        f"without: {rb[~th].mean():.1%} of {(~th).sum()})"
+    )
     for name, cm in (("as labelled", plain), ("best of both orders per image", best)):
         iou = M.class_ious(cm)
-        print(f"{name}: mIoU {100 * M.mean_iou(cm):.2f} %; IoU per class (%) "
-              f"{np.round(100 * iou.numpy(), 1).tolist()}")
+        print(
+            f"{name}: mIoU {100 * M.mean_iou(cm):.2f} %; IoU per class (%) "
+            f"{np.round(100 * iou.numpy(), 1).tolist()}"
+        )
 
 
 if __name__ == "__main__":

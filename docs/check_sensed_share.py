@@ -54,8 +54,10 @@ def shares(data: str | Path, n: int) -> tuple[np.ndarray, ...]:
     stored = ds["force_n"][:n]
     if not np.array_equal(stored, np.float32(force)):
         worst = np.abs(stored - np.array(force)).max()
-        raise SystemExit(f"{data}: the re-simulated forces differ from force_n (max {worst:.3g} "
-                         "N): made by other simulator code?")  # fmt: skip
+        raise SystemExit(
+            f"{data}: the re-simulated forces differ from force_n (max {worst:.3g} "
+            "N): made by other simulator code?"
+        )
     return np.array(hand), np.array(active), np.array(share), np.array(force)
 
 
@@ -69,15 +71,19 @@ def main() -> None:
     for cls, name in ((True, "hands"), (False, "non-hands")):
         m = hand == cls
         q = np.percentile(share[m], [10, 50, 90])
-        print(f"{name}: {m.sum()} samples; sensed share of the force, 10/50/90th percentile "
-              f"{q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f}")  # fmt: skip
+        print(
+            f"{name}: {m.sum()} samples; sensed share of the force, 10/50/90th percentile "
+            f"{q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f}"
+        )
         for lo, hi in BINS:
             k = m & (active >= lo) & (active < (hi or np.inf))
             if k.any():
                 span = f"{lo}-{hi - 1}" if hi else f"{lo}+"
                 off = np.mean(share[k] < 0.5)
-                print(f"  {span:>6} active taxels: {k.sum():4d} samples, median share "
-                      f"{np.median(share[k]):.2f}, under half on the skin {off:.0%}")  # fmt: skip
+                print(
+                    f"  {span:>6} active taxels: {k.sum():4d} samples, median share "
+                    f"{np.median(share[k]):.2f}, under half on the skin {off:.0%}"
+                )
 
 
 if __name__ == "__main__":

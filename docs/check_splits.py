@@ -63,13 +63,25 @@ def main() -> None:
     print("|---|---|---|---|---|---|")
     for name, (idx, right) in split_predictions(args.checkpoint, args.dataset).items():
         h = hand[idx]
-        print(f"| {name} | {len(idx)} | {100 * right.mean():.2f} | {100 * right[h].mean():.2f} "
-              f"| {100 * right[~h].mean():.2f} | {np.median(force[idx][h]):.1f} |")
-        bins = accuracy_by_bins(right[h].astype(int), np.ones(h.sum(), int), force[idx][h],
-                                ["miss", "hand"], FORCE_EDGES_N)  # fmt: skip
-        by_force.append(f"| {name} | " + " | ".join(
-            f"{100 * b['per_class']['hand']['accuracy']:.0f} ({b['n']})"
-            if b["n"] else "–" for b in bins) + " |")  # fmt: skip
+        print(
+            f"| {name} | {len(idx)} | {100 * right.mean():.2f} | {100 * right[h].mean():.2f} "
+            f"| {100 * right[~h].mean():.2f} | {np.median(force[idx][h]):.1f} |"
+        )
+        bins = accuracy_by_bins(
+            right[h].astype(int),
+            np.ones(h.sum(), int),
+            force[idx][h],
+            ["miss", "hand"],
+            FORCE_EDGES_N,
+        )
+        by_force.append(
+            f"| {name} | "
+            + " | ".join(
+                f"{100 * b['per_class']['hand']['accuracy']:.0f} ({b['n']})" if b["n"] else "–"
+                for b in bins
+            )
+            + " |"
+        )
         if name != "train":
             for s in np.unique(subject[idx][h]):
                 m = h & (subject[idx] == s)
@@ -80,21 +92,33 @@ def main() -> None:
     print("\n".join(by_force))
     people.sort()
     acc, med = np.array([p[0] for p in people]), np.array([p[1] for p in people])
-    r = (f"r = {np.corrcoef(acc, med)[0, 1]:.2f}" if len(people) > 1 and acc.std() and med.std()
-         else "undefined (too few people, or all alike)")  # fmt: skip
-    print(f"\nHeld-out people ({len(people)}): correlation of hand accuracy with median press "
-          f"force {r}")
+    r = (
+        f"r = {np.corrcoef(acc, med)[0, 1]:.2f}"
+        if len(people) > 1 and acc.std() and med.std()
+        else "undefined (too few people, or all alike)"
+    )
+    print(
+        f"\nHeld-out people ({len(people)}): correlation of hand accuracy with median press "
+        f"force {r}"
+    )
     for lo, hi in ((0, 20), (20, 30), (30, np.inf)):
         group = [p for p in people if lo <= p[1] < hi]
         pooled = sum(p[0] * p[4] for p in group) / max(1, sum(p[4] for p in group))
-        print(f"- median force {lo:g}–{hi:g} N: {len(group)} people, hands recognised "
-              f"{100 * pooled:.1f} % (people {100 * min(p[0] for p in group):.0f}–"
-              f"{100 * max(p[0] for p in group):.0f} %)" if group else f"- {lo:g}–{hi:g} N: none")
+        print(
+            f"- median force {lo:g}–{hi:g} N: {len(group)} people, hands recognised "
+            f"{100 * pooled:.1f} % (people {100 * min(p[0] for p in group):.0f}–"
+            f"{100 * max(p[0] for p in group):.0f} %)"
+            if group
+            else f"- {lo:g}–{hi:g} N: none"
+        )
     print("\n| subject | split | hands | accuracy % | median force, N |\n|---|---|---|---|---|")
     shown = people if len(people) <= 13 else [*people[:8], None, *people[-5:]]
     for p in shown:
-        print("| … | | | | |" if p is None else
-              f"| {p[2]} | {p[3]} | {p[4]} | {100 * p[0]:.0f} | {p[1]:.1f} |")  # fmt: skip
+        print(
+            "| … | | | | |"
+            if p is None
+            else f"| {p[2]} | {p[3]} | {p[4]} | {100 * p[0]:.0f} | {p[1]:.1f} |"
+        )
 
 
 if __name__ == "__main__":

@@ -77,10 +77,14 @@ def main() -> None:
             ms = 1e3 * time_per_image.__wrapped__(fast, size, n_warmup=20, n_runs=args.runs)
             rows[flush] = (ms, seconds_per_step(model, size, args.steps))
         label = "flushed to zero" if flush else "kept (IEEE)"
-        print(f"subnormals {label:16s}: fast path {rows[flush][0]:7.2f} ms/image, "
-              f"training step (batch 64) {rows[flush][1]:6.3f} s, 1 thread")
-    print(f"flushing is {rows[False][0] / rows[True][0]:.2f}x faster at inference, "
-          f"{rows[False][1] / rows[True][1]:.2f}x in training")
+        print(
+            f"subnormals {label:16s}: fast path {rows[flush][0]:7.2f} ms/image, "
+            f"training step (batch 64) {rows[flush][1]:6.3f} s, 1 thread"
+        )
+    print(
+        f"flushing is {rows[False][0] / rows[True][0]:.2f}x faster at inference, "
+        f"{rows[False][1] / rows[True][1]:.2f}x in training"
+    )
 
 
 if __name__ == "__main__":

@@ -39,13 +39,19 @@ def main() -> None:
         data = load_data(args.data, run, progress=False)
         nets = [(str(path), model)]
         if run.distill_from:
-            nets.append((f"its teacher {run.distill_from}",
-                         model_from_checkpoint(load_checkpoint(run.distill_from))[0]))
+            nets.append(
+                (
+                    f"its teacher {run.distill_from}",
+                    model_from_checkpoint(load_checkpoint(run.distill_from))[0],
+                )
+            )
         for name, net in nets:
             net = FlipTTA(net.eval(), PAPER_VIEWS) if args.tta else net.eval()
             key = "accuracy" if run.task == "classify" else "mean_iou"
-            cells = [evaluate_tensors(net, part, run.model.num_classes).metrics[key]
-                     for part in (data.train, data.val, data.test)]  # fmt: skip
+            cells = [
+                evaluate_tensors(net, part, run.model.num_classes).metrics[key]
+                for part in (data.train, data.val, data.test)
+            ]
             print(f"| {name} | {key} | " + " | ".join(f"{100 * c:.2f} %" for c in cells) + " |")
 
 

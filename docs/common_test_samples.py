@@ -43,8 +43,12 @@ def press_keys(data_dir: Path) -> np.ndarray:
     """(S, 2) int64 (episode seed, subject id) of every sample: which press it is."""
     with open_dataset(data_dir) as ds:
         s = ds.file["samples"]
-        return np.column_stack([np.asarray(s["episode_seed"][:]).astype(np.int64),
-                                np.asarray(s["subject_id"][:]).astype(np.int64)])  # fmt: skip
+        return np.column_stack(
+            [
+                np.asarray(s["episode_seed"][:]).astype(np.int64),
+                np.asarray(s["subject_id"][:]).astype(np.int64),
+            ]
+        )
 
 
 def scored_on(row: dict) -> Path:
@@ -82,19 +86,23 @@ def compare_classifiers(a: dict, b: dict, idx: np.ndarray) -> str:
     only_a, only_b = int((right[0] & ~right[1]).sum()), int((right[1] & ~right[0]).sum())
     acc = [100 * r.mean() for r in right]
     diff = grouped_difference_interval(right[1], right[0], groups_of(a, idx))
-    return (f"{len(idx)} common test samples: accuracy A {acc[0]:.2f} %, B {acc[1]:.2f} % "
-            f"(B − A {acc[1] - acc[0]:+.2f} points, 95 % interval with subjects redrawn "
-            f"{_points(diff)}); only A right {only_a}, only B right {only_b}, McNemar p = "
-            f"{mcnemar_p(only_a, only_b):.3g}")  # fmt: skip
+    return (
+        f"{len(idx)} common test samples: accuracy A {acc[0]:.2f} %, B {acc[1]:.2f} % "
+        f"(B − A {acc[1] - acc[0]:+.2f} points, 95 % interval with subjects redrawn "
+        f"{_points(diff)}); only A right {only_a}, only B right {only_b}, McNemar p = "
+        f"{mcnemar_p(only_a, only_b):.3g}"
+    )
 
 
 def compare_segmenters(a: dict, b: dict, idx: np.ndarray) -> str:
     cms = [np.asarray(r["per_image_cm"], dtype=np.float64)[position(r, idx)] for r in (a, b)]
     miou = [100 * float(batched_mean_iou(cm.sum(0)[None])[0]) for cm in cms]
     diff = grouped_mean_iou_difference_interval(cms[1], cms[0], groups_of(a, idx))
-    return (f"{len(idx)} common test images: mIoU A {miou[0]:.2f} %, B {miou[1]:.2f} % "
-            f"(B − A {miou[1] - miou[0]:+.2f} points, 95 % interval with subjects redrawn "
-            f"{_points(diff)})")  # fmt: skip
+    return (
+        f"{len(idx)} common test images: mIoU A {miou[0]:.2f} %, B {miou[1]:.2f} % "
+        f"(B − A {miou[1] - miou[0]:+.2f} points, 95 % interval with subjects redrawn "
+        f"{_points(diff)})"
+    )
 
 
 def main() -> None:
@@ -106,8 +114,14 @@ def main() -> None:
     for a in rows_a:
         if a.get("members") or a.get("tta_views") or a.get("test_indices") is None:
             continue
-        match = [b for b in rows_b if b["task"] == a["task"] and not b.get("members")
-                 and not b.get("tta_views") and method_label(b) == method_label(a)]  # fmt: skip
+        match = [
+            b
+            for b in rows_b
+            if b["task"] == a["task"]
+            and not b.get("members")
+            and not b.get("tta_views")
+            and method_label(b) == method_label(a)
+        ]
         for b in match:
             idx = common(a, b)
             if a["task"] == "classify":

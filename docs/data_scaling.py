@@ -41,20 +41,26 @@ from tactile.dataset import open_dataset
 from tactile.plot import coverage_mask
 
 PAPER = {"HandsNet": paper.HANDSNET_ACCURACY_PCT, "SegNet": paper.SEGNET_MIOU_PCT}
-TASKS = (("classify", "accuracy", "test accuracy, %", "hand / non-hand"),
-         ("segment", "mean_iou", "test mean IoU, %", "hand parts (7 classes)"))  # fmt: skip
+TASKS = (
+    ("classify", "accuracy", "test accuracy, %", "hand / non-hand"),
+    ("segment", "mean_iou", "test mean IoU, %", "hand parts (7 classes)"),
+)
 
 
-XLABEL = {"train": "training samples (count, log scale; segmenters: hand images)",
-          "density": "taxels per cm² of covered skin (log scale)"}  # fmt: skip
+XLABEL = {
+    "train": "training samples (count, log scale; segmenters: hand images)",
+    "density": "taxels per cm² of covered skin (log scale)",
+}
 
 
 def skin_density(data_dir: Path) -> tuple[float, float]:
     """(taxels per cm² of the tactile map's covered area, covered share of the map in %) of a
     dataset's part."""
     if not (data_dir / "dataset.h5").is_file():
-        raise SystemExit(f"--x density needs the training dataset at {data_dir} (dataset.h5 "
-                         "missing); regenerate it there or score models whose data is present")
+        raise SystemExit(
+            f"--x density needs the training dataset at {data_dir} (dataset.h5 "
+            "missing); regenerate it there or score models whose data is present"
+        )
     with open_dataset(data_dir) as ds:
         covered = coverage_mask(ds.map)
         per_cm2 = ds.layout.n_taxels / (covered.sum() * ds.map.step_mm**2 / 100.0)
@@ -86,8 +92,10 @@ def points(paths: list[Path], x: str = "train") -> dict[str, dict[str, list[tupl
                 continue
             shared = row.get("shared_with_training") or {}
             if shared.get("test_samples"):
-                raise SystemExit(f"{path}: {row['checkpoint']} is scored on subjects it "
-                                 "was trained on; score it on its own dataset's test split")
+                raise SystemExit(
+                    f"{path}: {row['checkpoint']} is scored on subjects it "
+                    "was trained on; score it on its own dataset's test split"
+                )
             data = row.get("train_data") or {}
             if data.get("n_train") is None:
                 raise SystemExit(f"{path}: {row['checkpoint']} does not record its training data")
@@ -99,7 +107,8 @@ def points(paths: list[Path], x: str = "train") -> dict[str, dict[str, list[tupl
                 where, covered = skin_density(Path(data["path"]))
                 line += f", {10 * round(covered / 10):.0f} % covered"
             out[row["task"]][line].append(
-                (where, 100 * row["metrics"][key], Path(data["path"]).name, interval_pct(row)))
+                (where, 100 * row["metrics"][key], Path(data["path"]).name, interval_pct(row))
+            )
     return out
 
 
@@ -109,8 +118,11 @@ def method_of(row: dict) -> str:
     test-time flips (``handskin evaluate --tta``)."""
     width = width_label(row)
     bf16 = " bf16" if trained_precision(row) == "bf16" else ""
-    return method_label(row) + ("" if width is None else f" {width}") + (
-        bf16 + (TTA_SUFFIX if row.get("tta_views") else ""))  # fmt: skip
+    return (
+        method_label(row)
+        + ("" if width is None else f" {width}")
+        + (bf16 + (TTA_SUFFIX if row.get("tta_views") else ""))
+    )
 
 
 def _spread(ticks: list[float], ratio: float = 1.2) -> list[float]:
@@ -136,15 +148,27 @@ def chart(pts: dict, png: Path, x: str = "train") -> Path:
             line = ax.plot([r[0] for r in rows], [r[1] for r in rows], style, label=method)[0]
             for n, score, _, span in rows:
                 if span is not None:
-                    ax.errorbar(n, score, yerr=[[score - span[0]], [span[1] - score]],
-                                color=line.get_color(), capsize=3, lw=1)  # fmt: skip
-            labels += [(n, score, f"{score:.1f} ({name})", line.get_color())
-                       for n, score, name, _ in rows]  # fmt: skip
+                    ax.errorbar(
+                        n,
+                        score,
+                        yerr=[[score - span[0]], [span[1] - score]],
+                        color=line.get_color(),
+                        capsize=3,
+                        lw=1,
+                    )
+            labels += [
+                (n, score, f"{score:.1f} ({name})", line.get_color()) for n, score, name, _ in rows
+            ]
             base = method.split(" ")[0].rstrip(",")
             if base in PAPER and base not in drawn:
                 drawn.add(base)
-                ax.axhline(PAPER[base], ls="--", color=line.get_color(), lw=1,
-                           label=f"paper: {base} {PAPER[base]:.2f} %")  # fmt: skip
+                ax.axhline(
+                    PAPER[base],
+                    ls="--",
+                    color=line.get_color(),
+                    lw=1,
+                    label=f"paper: {base} {PAPER[base]:.2f} %",
+                )
         ns = [r[0] for rows in pts.get(task, {}).values() for r in rows]
         ax.set_xscale("log")
         if ns:
@@ -159,8 +183,11 @@ def chart(pts: dict, png: Path, x: str = "train") -> Path:
         ax.set(xlabel=XLABEL[x], ylabel=ylabel, title=title)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="lower right" if task == "classify" else "upper left")
-    what = ("More synthetic data: test score against training set size" if x == "train" else
-            "Denser skin: test score against taxel density")  # fmt: skip
+    what = (
+        "More synthetic data: test score against training set size"
+        if x == "train"
+        else "Denser skin: test score against taxel density"
+    )
     fig.suptitle(f"{what} (each point on its own dataset's held-out subjects)", fontsize=10)
     fig.tight_layout()
     fig.savefig(png, dpi=110)
@@ -191,8 +218,16 @@ def _label_points(ax, labels: list[tuple[float, float, str, str]]) -> None:
         lowest = min(lowest, min(heights) - gap)
         for (_, score, text, color), y in zip(group, heights, strict=True):
             line = {"arrowstyle": "-", "lw": 0.5, "color": color}
-            ax.annotate(text, (n, score), xytext=(n * 1.06, y), textcoords="data", fontsize=7,
-                        color=color, va="center", arrowprops=line if y != score else None)
+            ax.annotate(
+                text,
+                (n, score),
+                xytext=(n * 1.06, y),
+                textcoords="data",
+                fontsize=7,
+                color=color,
+                va="center",
+                arrowprops=line if y != score else None,
+            )
     ax.set_ylim(lowest, hi)
 
 
@@ -204,15 +239,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("reports", nargs="+", type=Path, help="report JSON files of handskin evaluate")
     ap.add_argument("--png", type=Path, required=True, help="chart to write (PNG path)")
-    ap.add_argument("--x", choices=sorted(XLABEL), default="train",
-                    help="x axis: training samples (count) or the skin's taxels per cm²")
+    ap.add_argument(
+        "--x",
+        choices=sorted(XLABEL),
+        default="train",
+        help="x axis: training samples (count) or the skin's taxels per cm²",
+    )
     args = ap.parse_args()
     pts = points(args.reports, args.x)
     unit = " train" if args.x == "train" else " taxels/cm²"
     for task, methods in pts.items():
         for method, rows in sorted(methods.items()):
-            text = ", ".join(f"{n:g}{unit}: {s:.2f} % ({d}{_span(i)})"
-                             for n, s, d, i in sorted(rows, key=lambda r: r[:3]))
+            text = ", ".join(
+                f"{n:g}{unit}: {s:.2f} % ({d}{_span(i)})"
+                for n, s, d, i in sorted(rows, key=lambda r: r[:3])
+            )
             print(task, method, text)
     print(f"chart written to {chart(pts, args.png, args.x)}")
 

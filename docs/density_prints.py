@@ -59,8 +59,10 @@ def crop(*images: np.ndarray) -> tuple[slice, slice]:
     """Rows and columns of the first image's non-zero box grown by `MARGIN_PX`."""
     r, c = np.flatnonzero(images[0].any(1)), np.flatnonzero(images[0].any(0))
     h, w = images[0].shape
-    return (slice(max(r[0] - MARGIN_PX, 0), min(r[-1] + MARGIN_PX + 1, h)),
-            slice(max(c[0] - MARGIN_PX, 0), min(c[-1] + MARGIN_PX + 1, w)))  # fmt: skip
+    return (
+        slice(max(r[0] - MARGIN_PX, 0), min(r[-1] + MARGIN_PX + 1, h)),
+        slice(max(c[0] - MARGIN_PX, 0), min(c[-1] + MARGIN_PX + 1, w)),
+    )
 
 
 def image_miou(truth: np.ndarray, pred: np.ndarray) -> float:
@@ -72,8 +74,12 @@ def draw(pairs: list[tuple[Path, Path]], indices: list[int], png: Path) -> Path:
     """One row per sample; three panels per skin."""
     import torch
 
-    fig, axes = plt.subplots(len(indices), 3 * len(pairs), squeeze=False,
-                             figsize=(2.2 * 3 * len(pairs), 2.1 * len(indices)))  # fmt: skip
+    fig, axes = plt.subplots(
+        len(indices),
+        3 * len(pairs),
+        squeeze=False,
+        figsize=(2.2 * 3 * len(pairs), 2.1 * len(indices)),
+    )
     for k, (data, ckpt) in enumerate(pairs):
         seg = load_predictor(ckpt)
         with open_dataset(data) as ds:
@@ -83,8 +89,11 @@ def draw(pairs: list[tuple[Path, Path]], indices: list[int], png: Path) -> Path:
                 pred = segment(image, seg)
                 box = crop(image)
                 miou = image_miou(torch.from_numpy(truth), torch.from_numpy(pred))
-                panels = ((image, "gray", f"{name} #{i}"), (PALETTE[truth], None, "truth"),
-                          (PALETTE[pred], None, f"{ckpt.parent.name}: {miou:.0f} % mIoU"))
+                panels = (
+                    (image, "gray", f"{name} #{i}"),
+                    (PALETTE[truth], None, "truth"),
+                    (PALETTE[pred], None, f"{ckpt.parent.name}: {miou:.0f} % mIoU"),
+                )
                 for j, (img, cmap, title) in enumerate(panels):
                     ax = axes[row, 3 * k + j]
                     ax.imshow(img[box], cmap=cmap, interpolation="nearest")
@@ -92,8 +101,11 @@ def draw(pairs: list[tuple[Path, Path]], indices: list[int], png: Path) -> Path:
                     ax.axis("off")
     handles = [plt.Rectangle((0, 0), 1, 1, color=PALETTE[c] / 255) for c in range(1, 7)]
     fig.legend(handles, CLASS_NAMES[1:], loc="lower center", ncol=6, fontsize=8)
-    fig.suptitle("The same presses on each skin: tactile image, true parts, segmenter "
-                 "(crops of the 1 mm map)", fontsize=10)  # fmt: skip
+    fig.suptitle(
+        "The same presses on each skin: tactile image, true parts, segmenter "
+        "(crops of the 1 mm map)",
+        fontsize=10,
+    )
     fig.tight_layout(rect=(0, 0.04, 1, 0.97))
     fig.savefig(png, dpi=90)
     return png

@@ -64,8 +64,10 @@ def main(
     data: Annotated[Path, typer.Option(help="Synthetic dataset folder (dataset.h5).")],
     classifier: Annotated[Path, typer.Option(help="Classifier checkpoint (.pt file).")],
     segmenter: Annotated[Path, typer.Option(help="Segmenter checkpoint (.pt file).")],
-    index: Annotated[int | None, typer.Option(
-        help="Sample index (count, 0-based); default: picked from the test split.")] = None,
+    index: Annotated[
+        int | None,
+        typer.Option(help="Sample index (count, 0-based); default: picked from the test split."),
+    ] = None,
     out: Annotated[Path, typer.Option(help="Folder of the PNG files.")] = DOCS,
 ) -> None:
     """Write prediction.png, prediction_parts.png and prediction_3d.png into OUT."""

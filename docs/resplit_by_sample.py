@@ -55,17 +55,27 @@ def resplit_by_sample(src: Path, dst: Path, seed: int = 0) -> dict[str, object]:
         subject = np.asarray(f["samples/subject_id"][:])
         old_test = np.asarray(f["splits/test"][:])
     rng = np.random.default_rng(seed)
-    test = np.sort(np.concatenate([
-        rng.choice(np.flatnonzero(hand == c), int((hand[old_test] == c).sum()), replace=False)
-        for c in (False, True)]))  # fmt: skip
+    test = np.sort(
+        np.concatenate(
+            [
+                rng.choice(
+                    np.flatnonzero(hand == c), int((hand[old_test] == c).sum()), replace=False
+                )
+                for c in (False, True)
+            ]
+        )
+    )
     train = np.setdiff1d(np.arange(len(hand)), test)
     shutil.copytree(src, dst)
     _write_splits(dst, train, test)
     seen = set(subject[train][hand[train]].tolist())
     test_hands = test[hand[test]]
-    return {"test_hands": len(test_hands), "test_non_hands": int((~hand[test]).sum()),
-            "test_hands_of_training_people": int(sum(s in seen for s in subject[test_hands])),
-            "seed": seed}  # fmt: skip
+    return {
+        "test_hands": len(test_hands),
+        "test_non_hands": int((~hand[test]).sum()),
+        "test_hands_of_training_people": int(sum(s in seen for s in subject[test_hands])),
+        "seed": seed,
+    }
 
 
 def common_copy(src: Path, other: Path, dst: Path) -> int:
@@ -85,8 +95,12 @@ def main() -> None:
     p.add_argument("dataset", type=Path, help="a handskin dataset folder")
     p.add_argument("out", type=Path, help="the copy's folder (must not exist)")
     p.add_argument("--seed", type=int, default=0, help="seed of the draw (no unit)")
-    p.add_argument("--common", type=Path, help="also write this copy of DATASET, tested on the "
-                   "samples both test splits hold (must not exist)")
+    p.add_argument(
+        "--common",
+        type=Path,
+        help="also write this copy of DATASET, tested on the "
+        "samples both test splits hold (must not exist)",
+    )
     a = p.parse_args()
     if a.common is not None:
         _check(a.dataset, a.common)

@@ -67,8 +67,10 @@ class FidelityPlan:
             if not lo <= value <= hi:
                 raise ConfigError(f"{name} = {value} is out of range; allowed [{lo}, {hi}]")
         if min(self.image_px) < 24 or max(self.image_px) > 1024:
-            raise ConfigError(f"image_px = {self.image_px}: each side must be 24..1024 pixels "
-                              "(HandsNet's four pooling blocks need >= 24)")  # fmt: skip
+            raise ConfigError(
+                f"image_px = {self.image_px}: each side must be 24..1024 pixels "
+                "(HandsNet's four pooling blocks need >= 24)"
+            )
         if not 0 <= self.seed < 2**63:
             raise ConfigError(f"seed = {self.seed} is out of range; allowed [0, 2**63 - 1]")
         if self.device != "cpu":
@@ -92,14 +94,16 @@ def probe_run(arch: str, plan: FidelityPlan) -> RunConfig:
     from learn.experiments.models import preset_run
 
     drop = max(1, round(0.75 * plan.epochs))
-    run = preset_run(arch, epochs=plan.epochs, seed=plan.seed, lr_drop_period_epochs=drop,
-                     device=plan.device)  # fmt: skip
+    run = preset_run(
+        arch, epochs=plan.epochs, seed=plan.seed, lr_drop_period_epochs=drop, device=plan.device
+    )
     model = dataclasses.replace(run.model, input_size=tuple(plan.image_px))
     return dataclasses.replace(run, model=model, val_fraction=0.0, flips=False)
 
 
-def read_tensors(folder: Path, task: str, plan: FidelityPlan, indices: np.ndarray,
-                 progress: bool) -> TensorData:  # fmt: skip
+def read_tensors(
+    folder: Path, task: str, plan: FidelityPlan, indices: np.ndarray, progress: bool
+) -> TensorData:
     """Samples ``indices`` of a dataset as TensorData at ``plan.image_px`` (no flips)."""
     from learn.data import TorchTactileDataset
     from learn.folder import materialize
@@ -109,8 +113,9 @@ def read_tensors(folder: Path, task: str, plan: FidelityPlan, indices: np.ndarra
     return materialize(ds, f"reading {folder.name}", progress)
 
 
-def trained_model(run: RunConfig, train: Callable[[], TensorData], out: Path,
-                  progress: bool) -> nn.Module:  # fmt: skip
+def trained_model(
+    run: RunConfig, train: Callable[[], TensorData], out: Path, progress: bool
+) -> nn.Module:
     """The probe trained on ``train`` (a callable giving TensorData) into ``out``, reused when
     ``last.pt`` holds the requested epochs (resumed when fewer); the model in eval mode."""
     from learn.checkpoint import LAST, load_checkpoint, model_from_checkpoint
@@ -136,8 +141,15 @@ def _tag(*parts: object) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:10]
 
 
-def evaluate_setting(arch: str, folder: Path, test_dir: Path, tests: dict[str, TensorData],
-                     out: Path, plan: FidelityPlan, progress: bool) -> float:  # fmt: skip
+def evaluate_setting(
+    arch: str,
+    folder: Path,
+    test_dir: Path,
+    tests: dict[str, TensorData],
+    out: Path,
+    plan: FidelityPlan,
+    progress: bool,
+) -> float:
     """Test metric (%) of the ``arch`` probe trained on ``folder`` minus the test groups:
     accuracy (HandsNet) or mean IoU (SegNet), on ``tests[arch]`` (TensorData)."""
     from learn.evaluate import evaluate_tensors
@@ -157,13 +169,23 @@ def evaluate_setting(arch: str, folder: Path, test_dir: Path, tests: dict[str, T
     return 100.0 * float(res.metrics[METRIC[arch]])
 
 
-def run_fidelity(out: str | Path, *, data_dir: str | Path | None = None,
-                 settings: str | list[str] | None = None, quick: bool = False, seed: int = 0,
-                 n: int | None = None, epochs: int | None = None,
-                 image_px: tuple[int, int] | None = None, workers: int | None = None,
-                 part: str = "forearm", segnet: bool = False,
-                 base: GenerateConfig | None = None, device: str = "cpu",
-                 progress: bool = True) -> dict:  # fmt: skip
+def run_fidelity(
+    out: str | Path,
+    *,
+    data_dir: str | Path | None = None,
+    settings: str | list[str] | None = None,
+    quick: bool = False,
+    seed: int = 0,
+    n: int | None = None,
+    epochs: int | None = None,
+    image_px: tuple[int, int] | None = None,
+    workers: int | None = None,
+    part: str = "forearm",
+    segnet: bool = False,
+    base: GenerateConfig | None = None,
+    device: str = "cpu",
+    progress: bool = True,
+) -> dict:
     """Run the experiment into ``out`` (report.md, results.json, PNG charts); returns results.
 
     n : samples generated per setting (None: `QUICK` or `FULL`). base : the GenerateConfig the
@@ -174,15 +196,21 @@ def run_fidelity(out: str | Path, *, data_dir: str | Path | None = None,
     from sim.generate import default_workers
 
     sizes = QUICK if quick else FULL
-    plan = FidelityPlan(sizes["n"] if n is None else n,
-                        sizes["epochs"] if epochs is None else epochs,
-                        tuple(IMAGE_PX if image_px is None else image_px),
-                        default_workers() if workers is None else workers, seed,
-                        segnet, device)  # fmt: skip
+    plan = FidelityPlan(
+        sizes["n"] if n is None else n,
+        sizes["epochs"] if epochs is None else epochs,
+        tuple(IMAGE_PX if image_px is None else image_px),
+        default_workers() if workers is None else workers,
+        seed,
+        segnet,
+        device,
+    )
     chosen = FS.resolve_settings(settings, quick)
     base = base if base is not None else GenerateConfig(part=part)
-    configs = {s.name: FS.setting_config(s, base, n=plan.n, seed=seed)
-               for s in (*chosen, FS.BY_NAME[FS.RICHEST])}  # fmt: skip
+    configs = {
+        s.name: FS.setting_config(s, base, n=plan.n, seed=seed)
+        for s in (*chosen, FS.BY_NAME[FS.RICHEST])
+    }
     out = Path(out)
     data = Path(data_dir) if data_dir is not None else out / "data"
     for path, what in ((out, "--out"), (data, "--data")):
@@ -190,14 +218,24 @@ def run_fidelity(out: str | Path, *, data_dir: str | Path | None = None,
     return _run(out, data, plan, chosen, configs, quick, progress)
 
 
-def _run(out: Path, data: Path, plan: FidelityPlan, chosen, configs: dict, quick: bool,
-         progress: bool) -> dict:  # fmt: skip
+def _run(
+    out: Path, data: Path, plan: FidelityPlan, chosen, configs: dict, quick: bool, progress: bool
+) -> dict:
     from learn.experiments.report import Report
 
     rich = configs[FS.RICHEST]
-    report = Report("fidelity", out, seed=plan.seed, config={
-        **dataclasses.asdict(plan), "quick": quick, "settings": [s.name for s in chosen],
-        "part": rich.part, "data": str(data)})  # fmt: skip
+    report = Report(
+        "fidelity",
+        out,
+        seed=plan.seed,
+        config={
+            **dataclasses.asdict(plan),
+            "quick": quick,
+            "settings": [s.name for s in chosen],
+            "part": rich.part,
+            "data": str(data),
+        },
+    )
     data.mkdir(parents=True, exist_ok=True)
     folders = {k: data / f"{k}-{FS.config_tag(c)}" for k, c in configs.items()}
     print(f"[fidelity] {FS.RICHEST}: {plan.n} samples (its test split is the shared test set)")
@@ -205,21 +243,31 @@ def _run(out: Path, data: Path, plan: FidelityPlan, chosen, configs: dict, quick
     test_dir = folders[FS.RICHEST]
     archs = ("handsnet", "segnet") if plan.segnet else ("handsnet",)
     with_test = FD.test_indices(test_dir)
-    tests = {a: read_tensors(test_dir, probe_run(a, plan).task, plan, with_test, progress)
-             for a in archs}  # fmt: skip
+    tests = {
+        a: read_tensors(test_dir, probe_run(a, plan).task, plan, with_test, progress) for a in archs
+    }
     rows = []
     for setting in chosen:
         cfg, folder = configs[setting.name], folders[setting.name]
         if setting.name not in timings:
             print(f"[fidelity] {setting.name}: {plan.n} samples ({setting.note})")
             timings[setting.name] = FD.generate_set(cfg, folder, plan.workers, progress)
-        scores = {a: evaluate_setting(a, folder, test_dir, tests, out, plan, progress)
-                  for a in archs}  # fmt: skip
-        rows.append({"name": setting.name, "note": setting.note, "knobs": FS.knob_values(cfg),
-                     "changes": dict(setting.changes), "dataset": str(folder),
-                     "n_train": len(FD.training_indices(folder, test_dir)),
-                     **timings[setting.name], "accuracy_pct": scores["handsnet"],
-                     "miou_pct": scores.get("segnet")})  # fmt: skip
+        scores = {
+            a: evaluate_setting(a, folder, test_dir, tests, out, plan, progress) for a in archs
+        }
+        rows.append(
+            {
+                "name": setting.name,
+                "note": setting.note,
+                "knobs": FS.knob_values(cfg),
+                "changes": dict(setting.changes),
+                "dataset": str(folder),
+                "n_train": len(FD.training_indices(folder, test_dir)),
+                **timings[setting.name],
+                "accuracy_pct": scores["handsnet"],
+                "miou_pct": scores.get("segnet"),
+            }
+        )
     test = {"dataset": str(test_dir), "n_test": len(with_test), **timings[FS.RICHEST]}
     return FR.write_report(report, rows, plan, rich, test)
 

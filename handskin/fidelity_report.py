@@ -47,12 +47,16 @@ def tolerance_pt(best_pct: float, n_test: int) -> float:
     return max(MIN_TOL_PT, Z_95 * 100.0 * math.sqrt(max(p * (1 - p), 0.0) / max(n_test, 1)))
 
 
-def choose_default(speeds: Sequence[float | None], accs: Sequence[float | None],
-                   n_test: int) -> Choice | None:  # fmt: skip
+def choose_default(
+    speeds: Sequence[float | None], accs: Sequence[float | None], n_test: int
+) -> Choice | None:
     """The fastest setting within the tolerance of the best accuracy (%); None if no setting has
     both numbers. speeds : samples/s (None = unknown); accs : % (None = unknown)."""
-    ok = [i for i, (s, a) in enumerate(zip(speeds, accs, strict=True))
-          if s is not None and a is not None]  # fmt: skip
+    ok = [
+        i
+        for i, (s, a) in enumerate(zip(speeds, accs, strict=True))
+        if s is not None and a is not None
+    ]
     if not ok:
         return None
     best = max(ok, key=lambda i: accs[i])
@@ -63,16 +67,20 @@ def choose_default(speeds: Sequence[float | None], accs: Sequence[float | None],
 
 def choice_text(rows: list[dict], choice: Choice | None, default: str, n_test: int) -> str:
     """The report's closing paragraph: the rule, its outcome, and where the default stands."""
-    rule = ("**Rule.** The default is the fastest setting (samples per CPU-second) whose HandsNet "
-            f"accuracy on the shared test set is within max({MIN_TOL_PT:g} point, the 95 % "
-            f"binomial half-width of the best accuracy on {n_test} test samples) of the best.")
+    rule = (
+        "**Rule.** The default is the fastest setting (samples per CPU-second) whose HandsNet "
+        f"accuracy on the shared test set is within max({MIN_TOL_PT:g} point, the 95 % "
+        f"binomial half-width of the best accuracy on {n_test} test samples) of the best."
+    )
     if choice is None:
         return rule + "\n\n**Outcome.** unknown: no setting has both a measured speed and accuracy."
     c, b = rows[choice.index], rows[choice.best]
-    out = (f"{rule} Here the best is `{b['name']}` at {b['accuracy_pct']:.2f} %, the tolerance "
-           f"{choice.tolerance_pt:.2f} points.\n\n**Outcome.** `{c['name']}` "
-           f"({c['note']}): {c['per_core']:.2f} samples per CPU-second, "
-           f"{c['accuracy_pct']:.2f} %.")
+    out = (
+        f"{rule} Here the best is `{b['name']}` at {b['accuracy_pct']:.2f} %, the tolerance "
+        f"{choice.tolerance_pt:.2f} points.\n\n**Outcome.** `{c['name']}` "
+        f"({c['note']}): {c['per_core']:.2f} samples per CPU-second, "
+        f"{c['accuracy_pct']:.2f} %."
+    )
     now = next((r for r in rows if r["name"] == default), None)
     if now is None:
         return out + f" The current default `{default}` was not run."
@@ -80,23 +88,43 @@ def choice_text(rows: list[dict], choice: Choice | None, default: str, n_test: i
         return out + " It is the current default."
     if now["per_core"] is None or now["accuracy_pct"] is None:
         return out + f" The current default `{default}` has no measured speed (unknown)."
-    return (out + f" The current default `{default}` runs at {now['per_core']:.2f} samples per "
-            f"CPU-second ({now['per_core'] / c['per_core']:.2f} × `{c['name']}`'s) at "
-            f"{now['accuracy_pct']:.2f} % ({b['accuracy_pct'] - now['accuracy_pct']:.2f} points "
-            f"below the best): by this rule `{c['name']}` should become the default (a decision "
-            "for the maintainers, who also weigh what the data is for beyond hand / non-hand "
-            "accuracy, e.g. sequences or segmentation).")
+    return (
+        out + f" The current default `{default}` runs at {now['per_core']:.2f} samples per "
+        f"CPU-second ({now['per_core'] / c['per_core']:.2f} × `{c['name']}`'s) at "
+        f"{now['accuracy_pct']:.2f} % ({b['accuracy_pct'] - now['accuracy_pct']:.2f} points "
+        f"below the best): by this rule `{c['name']}` should become the default (a decision "
+        "for the maintainers, who also weigh what the data is for beyond hand / non-hand "
+        "accuracy, e.g. sequences or segmentation)."
+    )
 
 
 def settings_table(rows: list[dict], knob_headers: Sequence[str], segnet: bool) -> str:
     """Markdown: every setting's knobs, generation speed, and test accuracy (and mIoU)."""
-    head = ["setting", *knob_headers, "train samples", "rejected episodes", "workers",
-            "load avg", "wall samples/s", "samples per CPU-s", "HandsNet acc. %"]  # fmt: skip
+    head = [
+        "setting",
+        *knob_headers,
+        "train samples",
+        "rejected episodes",
+        "workers",
+        "load avg",
+        "wall samples/s",
+        "samples per CPU-s",
+        "HandsNet acc. %",
+    ]
     head += ["SegNet mIoU %"] if segnet else []
     body = []
     for r in rows:
-        row = [f"`{r['name']}`", *[_knob(v) for v in r["knobs"]], r["n_train"], r["rejects"],
-               r["workers"], r["load_avg"], r["samples_per_s"], r["per_core"], r["accuracy_pct"]]
+        row = [
+            f"`{r['name']}`",
+            *[_knob(v) for v in r["knobs"]],
+            r["n_train"],
+            r["rejects"],
+            r["workers"],
+            r["load_avg"],
+            r["samples_per_s"],
+            r["per_core"],
+            r["accuracy_pct"],
+        ]
         body.append(row + ([r.get("miou_pct")] if segnet else []))
     return markdown_table(head, body)
 
@@ -107,9 +135,15 @@ def _knob(v: object) -> object:
     return v if isinstance(v, str) else float(v)
 
 
-def speed_figure(rows: list[dict], key: str, ylabel: str, default: str, chosen: str | None,
-                 paper: tuple[float, str] | None = None,
-                 band: tuple[float, float] | None = None) -> Figure:  # fmt: skip
+def speed_figure(
+    rows: list[dict],
+    key: str,
+    ylabel: str,
+    default: str,
+    chosen: str | None,
+    paper: tuple[float, str] | None = None,
+    band: tuple[float, float] | None = None,
+) -> Figure:
     """Scatter of test metric (%) against generation speed (samples per CPU-second, log x), one
     labelled point per setting; the current default as a star, the chosen setting ringed,
     ``band`` (low, high) % shaded (the rule's tolerance), the paper's number as a dashed line
@@ -121,22 +155,42 @@ def speed_figure(rows: list[dict], key: str, ylabel: str, default: str, chosen: 
     from matplotlib.ticker import NullFormatter
 
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
-    pts = sorted((r for r in rows if r["per_core"] and r.get(key) is not None),
-                 key=lambda r: r["per_core"])  # fmt: skip
+    pts = sorted(
+        (r for r in rows if r["per_core"] and r.get(key) is not None), key=lambda r: r["per_core"]
+    )
     others = [r["name"] for r in pts if r["name"] != default]
     for k, r in enumerate(pts):
         is_default = r["name"] == default
         first = bool(others) and r["name"] == others[0]
         label = "current default" if is_default else ("setting" if first else None)
-        ax.scatter(r["per_core"], r[key], s=160 if is_default else 60,
-                   marker="*" if is_default else "o", color="C3" if is_default else "C0",
-                   zorder=3, label=label)  # fmt: skip
-        ax.annotate(r["name"], (r["per_core"], r[key]), textcoords="offset points",
-                    xytext=(6, 5 if _above_neighbour(pts, k, key) else -12), fontsize=8)
+        ax.scatter(
+            r["per_core"],
+            r[key],
+            s=160 if is_default else 60,
+            marker="*" if is_default else "o",
+            color="C3" if is_default else "C0",
+            zorder=3,
+            label=label,
+        )
+        ax.annotate(
+            r["name"],
+            (r["per_core"], r[key]),
+            textcoords="offset points",
+            xytext=(6, 5 if _above_neighbour(pts, k, key) else -12),
+            fontsize=8,
+        )
     for r in pts:
         if r["name"] == chosen:
-            ax.scatter(r["per_core"], r[key], s=420, facecolors="none", edgecolors="C2",
-                       linewidths=2, zorder=4, label="chosen by the rule")  # fmt: skip
+            ax.scatter(
+                r["per_core"],
+                r[key],
+                s=420,
+                facecolors="none",
+                edgecolors="C2",
+                linewidths=2,
+                zorder=4,
+                label="chosen by the rule",
+            )
     if band is not None:
         ax.axhspan(*band, color="C2", alpha=0.12, label="within the rule's tolerance of the best")
     if paper is not None:
@@ -179,38 +233,56 @@ def spaced(values: np.ndarray, min_ratio: float = 1.06) -> list[float]:
     return out
 
 
-def write_report(report: Report, rows: list[dict], plan: FidelityPlan, rich: GenerateConfig,
-                 test: dict) -> dict:  # fmt: skip
+def write_report(
+    report: Report, rows: list[dict], plan: FidelityPlan, rich: GenerateConfig, test: dict
+) -> dict:
     """Sections, charts and the choice of default of a run (``report``: a
     `learn.experiments.report.Report`; ``plan``: a `handskin.fidelity.FidelityPlan`; ``rich``:
     the richest setting's GenerateConfig; ``test``: the test set's path, size and timing);
     writes report.md and results.json and returns the results."""
     from learn.experiments import paper
 
-    choice = choose_default([r["per_core"] for r in rows],
-                            [r["accuracy_pct"] for r in rows], test["n_test"])  # fmt: skip
+    choice = choose_default(
+        [r["per_core"] for r in rows], [r["accuracy_pct"] for r in rows], test["n_test"]
+    )
     picked = None if choice is None else rows[choice.index]["name"]
     report.section("Protocol", _protocol_text(plan, rich, test))
     headers = [h for h, _, _ in FS.KNOB_COLUMNS]
     report.section("Settings, speed and accuracy", settings_table(rows, headers, plan.segnet))
-    paper_hn = (paper.HANDSNET_ACCURACY_PCT, f"paper: HandsNet {paper.HANDSNET_ACCURACY_PCT} % "
-                "(real data, 80 epochs)")  # fmt: skip
-    band = None if choice is None else (rows[choice.best]["accuracy_pct"] - choice.tolerance_pt,
-                                        rows[choice.best]["accuracy_pct"])  # fmt: skip
-    report.figure(speed_figure(rows, "accuracy_pct", "HandsNet test accuracy (%)", FS.DEFAULT,
-                               picked, paper_hn, band), "speed_accuracy.png",
-                  "HandsNet accuracy on the shared test set (richest setting) against "
-                  "generation speed; star: current default; ring: chosen by the rule")  # fmt: skip
+    paper_hn = (
+        paper.HANDSNET_ACCURACY_PCT,
+        f"paper: HandsNet {paper.HANDSNET_ACCURACY_PCT} % (real data, 80 epochs)",
+    )
+    band = (
+        None
+        if choice is None
+        else (
+            rows[choice.best]["accuracy_pct"] - choice.tolerance_pt,
+            rows[choice.best]["accuracy_pct"],
+        )
+    )
+    report.figure(
+        speed_figure(
+            rows, "accuracy_pct", "HandsNet test accuracy (%)", FS.DEFAULT, picked, paper_hn, band
+        ),
+        "speed_accuracy.png",
+        "HandsNet accuracy on the shared test set (richest setting) against "
+        "generation speed; star: current default; ring: chosen by the rule",
+    )
     if plan.segnet:
         paper_sn = (paper.SEGNET_MIOU_PCT, f"paper: SegNet mIoU {paper.SEGNET_MIOU_PCT} %")
-        report.figure(speed_figure(rows, "miou_pct", "SegNet test mean IoU (%)", FS.DEFAULT,
-                                   None, paper_sn), "speed_miou.png",
-                      "SegNet mean IoU on the shared test set against generation speed")
+        report.figure(
+            speed_figure(rows, "miou_pct", "SegNet test mean IoU (%)", FS.DEFAULT, None, paper_sn),
+            "speed_miou.png",
+            "SegNet mean IoU on the shared test set against generation speed",
+        )
     report.section("Not swept", NOT_SWEPT)
     report.section("Choice of default", choice_text(rows, choice, FS.DEFAULT, test["n_test"]))
-    results = {"settings": rows, "test_set": test,
-               "choice": None if choice is None else {**dataclasses.asdict(choice),
-                                                     "name": picked}}  # fmt: skip
+    results = {
+        "settings": rows,
+        "test_set": test,
+        "choice": None if choice is None else {**dataclasses.asdict(choice), "name": picked},
+    }
     report.write(results)
     return results
 
@@ -246,7 +318,9 @@ def _probe_text(plan: FidelityPlan) -> str:
     from handskin.fidelity import probe_run
 
     t = probe_run("handsnet", plan).train
-    return (f"the `learn.config.HANDSNET` preset's optimiser ({t.optimizer}, lr {t.lr:g}, batch "
-            f"{t.batch_size}) for {t.epochs} epochs (lr × {t.lr_drop_factor:g} every "
-            f"{t.lr_drop_period_epochs}), input {plan.image_px[0]} × {plan.image_px[1]} px, no "
-            "flips, no validation (the last epoch is tested)")
+    return (
+        f"the `learn.config.HANDSNET` preset's optimiser ({t.optimizer}, lr {t.lr:g}, batch "
+        f"{t.batch_size}) for {t.epochs} epochs (lr × {t.lr_drop_factor:g} every "
+        f"{t.lr_drop_period_epochs}), input {plan.image_px[0]} × {plan.image_px[1]} px, no "
+        "flips, no validation (the last epoch is tested)"
+    )

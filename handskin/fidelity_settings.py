@@ -44,19 +44,26 @@ class FidelitySetting:
 
 
 SETTINGS: tuple[FidelitySetting, ...] = (
-    FidelitySetting("cheapest", {"duration_scale": 0.5, "episode.skin.spread_sigma_m": 0.0},
-                    "half-length presses, no skin spread"),
+    FidelitySetting(
+        "cheapest",
+        {"duration_scale": 0.5, "episode.skin.spread_sigma_m": 0.0},
+        "half-length presses, no skin spread",
+    ),
     FidelitySetting("short", {"duration_scale": 0.5}, "half-length presses"),
     FidelitySetting("no_spread", {"episode.skin.spread_sigma_m": 0.0}, "no skin spread"),
-    FidelitySetting("coarse_hand", {"hand_detail": "coarse"},
-                    "palm of two flat boxes (no metacarpal or heel capsules)"),
+    FidelitySetting(
+        "coarse_hand",
+        {"hand_detail": "coarse"},
+        "palm of two flat boxes (no metacarpal or heel capsules)",
+    ),
     FidelitySetting("solver_1", {"episode.solver_iterations": 1}, "1 solver iteration per step"),
     FidelitySetting("default", {}, "GenerateConfig defaults"),
-    FidelitySetting("sequences", {"keep_sequences": True},
-                    "release simulated, 10 Hz sequence stored"),
+    FidelitySetting(
+        "sequences", {"keep_sequences": True}, "release simulated, 10 Hz sequence stored"
+    ),
     FidelitySetting("dt_2.5ms", {"episode.timestep_s": 0.0025}, "time step 2.5 ms"),
     FidelitySetting("rich", {"episode.timestep_s": 0.001}, "time step 1 ms; gives the test set"),
-)  # fmt: skip
+)
 BY_NAME: dict[str, FidelitySetting] = {s.name: s for s in SETTINGS}
 DEFAULT = "default"  # the setting equal to the current GenerateConfig defaults
 RICHEST = "rich"  # the setting of the shared test set
@@ -84,8 +91,10 @@ def resolve_settings(names: str | Sequence[str] | None, quick: bool) -> list[Fid
         names = [n.strip() for n in names.split(",") if n.strip()]
     unknown = [n for n in names if n not in BY_NAME]
     if unknown or not names:
-        raise ConfigError(f"unknown fidelity setting(s) {', '.join(unknown) or '(none given)'}; "
-                          f"choose among: {', '.join(BY_NAME)}")  # fmt: skip
+        raise ConfigError(
+            f"unknown fidelity setting(s) {', '.join(unknown) or '(none given)'}; "
+            f"choose among: {', '.join(BY_NAME)}"
+        )
     return [s for s in SETTINGS if s.name in set(names)]
 
 
@@ -95,8 +104,9 @@ def chunk_size_for(n: int) -> int:
     return max(1, min(32, math.ceil(n / 8)))
 
 
-def setting_config(setting: FidelitySetting, base: GenerateConfig, *, n: int,
-                   seed: int) -> GenerateConfig:
+def setting_config(
+    setting: FidelitySetting, base: GenerateConfig, *, n: int, seed: int
+) -> GenerateConfig:
     """``base`` (a GenerateConfig) with ``n``, ``seed``, the skin seed and the chunk size set,
     then the setting's changes; validated (ConfigError names the field)."""
     from tactile.config import override

@@ -51,8 +51,9 @@ class DataPlan:
 
 QUICK_DATA = DataPlan(n_source=600, n_target=200, n_pretrain=400)
 #: The quick learning settings: 3 fine-tuning epochs, 1 pretraining epoch without flips.
-QUICK_SETTINGS = TransferSettings(curve_sizes=(10, 30), finetune_epochs=3, pretrain_epochs=1,
-                                  pretrain_flips=False)  # fmt: skip
+QUICK_SETTINGS = TransferSettings(
+    curve_sizes=(10, 30), finetune_epochs=3, pretrain_epochs=1, pretrain_flips=False
+)
 
 
 def dataset_seed(seed: int, role: str) -> int:
@@ -69,8 +70,12 @@ def generate_config(role: str, seed: int, plan: DataPlan):
 
     cfg = {"part": PARTS[role], "n": plan.n(role), "seed": dataset_seed(seed, role)}
     if plan.tiny:
-        cfg |= {"n_subjects": 6, "instances_per_kind": 2, "duration_scale": TINY_DURATION_SCALE,
-                "episode": EpisodeConfig(max_attempts=TINY_MAX_ATTEMPTS)}  # fmt: skip
+        cfg |= {
+            "n_subjects": 6,
+            "instances_per_kind": 2,
+            "duration_scale": TINY_DURATION_SCALE,
+            "episode": EpisodeConfig(max_attempts=TINY_MAX_ATTEMPTS),
+        }
     return GenerateConfig(**cfg)
 
 
@@ -83,9 +88,11 @@ def ensure_dataset(folder: Path, cfg, plan: DataPlan, *, default: bool, progress
         with DatasetReader(folder) as ds:
             n, part, seed = len(ds), ds.attrs.get("part"), ds.attrs.get("seed")
         if default and (n, part, seed) != (cfg.n, cfg.part, cfg.seed):
-            raise ConfigError(f"{folder} holds {n} {part} samples of seed {seed}; this run needs "
-                              f"{cfg.n} of seed {cfg.seed}. Fix: another --out, or delete "
-                              f"{folder}")  # fmt: skip
+            raise ConfigError(
+                f"{folder} holds {n} {part} samples of seed {seed}; this run needs "
+                f"{cfg.n} of seed {cfg.seed}. Fix: another --out, or delete "
+                f"{folder}"
+            )
         print(f"reusing {folder} ({n} samples, part {part})")
         return folder
     from sim.generate import generate
@@ -101,9 +108,11 @@ def describe(folders: dict[str, Path]) -> str:
     lines = []
     for role, folder in folders.items():
         with DatasetReader(folder) as ds:
-            lines.append(f"- {role}: `{folder}` — part {ds.attrs.get('part')}, {len(ds)} samples "
-                         f"({int(ds['is_hand'][:].sum())} hands), seed {ds.attrs.get('seed')}, "
-                         f"map {ds.image.shape[1]}×{ds.image.shape[2]} px")  # fmt: skip
+            lines.append(
+                f"- {role}: `{folder}` — part {ds.attrs.get('part')}, {len(ds)} samples "
+                f"({int(ds['is_hand'][:].sum())} hands), seed {ds.attrs.get('seed')}, "
+                f"map {ds.image.shape[1]}×{ds.image.shape[2]} px"
+            )
     return "\n".join(lines) + (
         "\n\nThe pretraining and (unless given) target sets are both synthetic: they differ by "
         "seed, hence by simulated people (each set draws its own subject pool from its seed; "
@@ -116,10 +125,17 @@ def describe(folders: dict[str, Path]) -> str:
 
 
 def run_transfer_experiment(
-    out: str | Path, *, s: TransferSettings | None = None, plan: DataPlan | None = None,
-    source: Path | None = None, target: Path | None = None, pretrain: Path | None = None,
-    classifier: Path | None = None, segmenter: Path | None = None,
-    models_dir: Path | None = None, progress: bool = True,
+    out: str | Path,
+    *,
+    s: TransferSettings | None = None,
+    plan: DataPlan | None = None,
+    source: Path | None = None,
+    target: Path | None = None,
+    pretrain: Path | None = None,
+    classifier: Path | None = None,
+    segmenter: Path | None = None,
+    models_dir: Path | None = None,
+    progress: bool = True,
 ) -> dict:
     """Generate or reuse the datasets, then run Test C (``transfer_lib.run_transfer``)."""
     from learn.experiments import transfer_lib as T
@@ -130,17 +146,37 @@ def run_transfer_experiment(
     for task, ckpt in (("classify", classifier), ("segment", segmenter)):
         if ckpt is not None:
             T.model_config(task, Path(ckpt), s)
-    folders = {role: ensure_dataset(Path(given[role] or out / "data" / FOLDERS[role]),
-                                    cfgs[role], plan, default=given[role] is None,
-                                    progress=progress) for role in ROLES}  # fmt: skip
-    config = {"datasets": {k: str(v) for k, v in folders.items()},
-              "data_plan": dataclasses.asdict(plan), "classifier": classifier,
-              "segmenter": segmenter}  # fmt: skip
+    folders = {
+        role: ensure_dataset(
+            Path(given[role] or out / "data" / FOLDERS[role]),
+            cfgs[role],
+            plan,
+            default=given[role] is None,
+            progress=progress,
+        )
+        for role in ROLES
+    }
+    config = {
+        "datasets": {k: str(v) for k, v in folders.items()},
+        "data_plan": dataclasses.asdict(plan),
+        "classifier": classifier,
+        "segmenter": segmenter,
+    }
     from learn.experiments.transfer_report import run_transfer
 
-    return run_transfer(folders["source"], folders["target"], folders["pretrain"], out, s,
-                        classifier=classifier, segmenter=segmenter, models_dir=models_dir,
-                        notes=describe(folders), config=config, progress=progress)
+    return run_transfer(
+        folders["source"],
+        folders["target"],
+        folders["pretrain"],
+        out,
+        s,
+        classifier=classifier,
+        segmenter=segmenter,
+        models_dir=models_dir,
+        notes=describe(folders),
+        config=config,
+        progress=progress,
+    )
 
 
 def _opt(kind, help_text: str, *names: str):
@@ -148,46 +184,83 @@ def _opt(kind, help_text: str, *names: str):
 
 
 def transfer_command(
-    out: _opt(Path, "Experiment folder (path): report.md, results.json, PNG charts, data/, "
-              "models/."),
-    source: _opt(Path | None, "Forearm dataset folder (path); reused if it holds dataset.h5, "
-                 "else generated there. Default OUT/data/forearm.", "--source", "--data") = None,
-    target: _opt(Path | None, "End-effector dataset folder (path; real recordings welcome); "
-                 "reused or generated. Default OUT/data/end_effector.") = None,
-    pretrain_data: _opt(Path | None, "Synthetic end-effector pretraining dataset folder (path);"
-                        " reused or generated. Default OUT/data/end_effector_synthetic.") = None,
-    quick: _opt(bool, "Small version (minutes): 600 / 200 / 400 samples generated, 3 fine-tuning"
-                " epochs, 1 pretraining epoch (flips off), N = 10, 30, all.") = False,
+    out: _opt(
+        Path, "Experiment folder (path): report.md, results.json, PNG charts, data/, models/."
+    ),
+    source: _opt(
+        Path | None,
+        "Forearm dataset folder (path); reused if it holds dataset.h5, "
+        "else generated there. Default OUT/data/forearm.",
+        "--source",
+        "--data",
+    ) = None,
+    target: _opt(
+        Path | None,
+        "End-effector dataset folder (path; real recordings welcome); "
+        "reused or generated. Default OUT/data/end_effector.",
+    ) = None,
+    pretrain_data: _opt(
+        Path | None,
+        "Synthetic end-effector pretraining dataset folder (path);"
+        " reused or generated. Default OUT/data/end_effector_synthetic.",
+    ) = None,
+    quick: _opt(
+        bool,
+        "Small version (minutes): 600 / 200 / 400 samples generated, 3 fine-tuning"
+        " epochs, 1 pretraining epoch (flips off), N = 10, 30, all.",
+    ) = False,
     seed: _opt(int, "Seed (integer) of the generated datasets, initialisation and subsets.") = 0,
-    classifier: _opt(Path | None, "Forearm classifier checkpoint (.pt file); default: trained "
-                     "here on the source.") = None,
-    segmenter: _opt(Path | None, "Forearm segmenter checkpoint (.pt file); implies "
-                    "--segmentation.") = None,
+    classifier: _opt(
+        Path | None,
+        "Forearm classifier checkpoint (.pt file); default: trained here on the source.",
+    ) = None,
+    segmenter: _opt(
+        Path | None, "Forearm segmenter checkpoint (.pt file); implies --segmentation."
+    ) = None,
     segmentation: _opt(bool, "Also SegNet: zero-shot, fine-tuning and learning curve.") = False,
-    classification: _opt(bool, "HandsNet: zero-shot, fine-tuning and learning curve; "
-                         "--no-classification with --segmentation runs SegNet alone.") = True,
-    epochs: _opt(int | None, "Fine-tuning epochs (count; paper 120, quick 3); the lr halves "
-                 "after half of them.") = None,
-    pretrain_epochs: _opt(int | None, "Epochs (count) of the models trained here from scratch "
-                          "(default 80, quick 1).") = None,
-    curve: _opt(str | None, "Learning-curve sizes: comma-separated end-effector train sample "
-                "counts ('all' is added). Default 10,30,100,300; quick 10,30.") = None,
+    classification: _opt(
+        bool,
+        "HandsNet: zero-shot, fine-tuning and learning curve; "
+        "--no-classification with --segmentation runs SegNet alone.",
+    ) = True,
+    epochs: _opt(
+        int | None,
+        "Fine-tuning epochs (count; paper 120, quick 3); the lr halves after half of them.",
+    ) = None,
+    pretrain_epochs: _opt(
+        int | None, "Epochs (count) of the models trained here from scratch (default 80, quick 1)."
+    ) = None,
+    curve: _opt(
+        str | None,
+        "Learning-curve sizes: comma-separated end-effector train sample "
+        "counts ('all' is added). Default 10,30,100,300; quick 10,30.",
+    ) = None,
     n_target: _opt(int | None, "End-effector samples to generate (count).") = None,
     n_pretrain: _opt(int | None, "Synthetic pretraining samples to generate (count).") = None,
     n_source: _opt(int | None, "Forearm samples to generate (count).") = None,
     workers: _opt(int, "Generation processes (count).") = 1,
-    precision: _opt(str, "Number format of every training forward pass here: fp32 or bf16 "
-                    "(as handskin train --precision; about 1.6x faster on CPUs with native "
-                    "bf16; no unit).") = "fp32",
-    keep_scale: _opt(bool, "Also run the forearm model at its own scale: each end-effector "
-                     "image centred on a canvas of the forearm map's size (mm) instead of "
-                     "stretched to the network input, so a millimetre is as many input pixels "
-                     "as on the forearm; adds 'forearm at scale' rows.") = False,
-    device: _opt(str, DEVICE_HELP + " A fine-tuning result is reused only for the same device."
-                 ) = "cpu",
-    models: _opt(Path | None, "Folder (path) of the models trained here and of every "
-                 "fine-tuning result (finetune/*.json); default OUT/models; a rerun reuses them, "
-                 "so a stopped run resumes.") = None,
+    precision: _opt(
+        str,
+        "Number format of every training forward pass here: fp32 or bf16 "
+        "(as handskin train --precision; about 1.6x faster on CPUs with native "
+        "bf16; no unit).",
+    ) = "fp32",
+    keep_scale: _opt(
+        bool,
+        "Also run the forearm model at its own scale: each end-effector "
+        "image centred on a canvas of the forearm map's size (mm) instead of "
+        "stretched to the network input, so a millimetre is as many input pixels "
+        "as on the forearm; adds 'forearm at scale' rows.",
+    ) = False,
+    device: _opt(
+        str, DEVICE_HELP + " A fine-tuning result is reused only for the same device."
+    ) = "cpu",
+    models: _opt(
+        Path | None,
+        "Folder (path) of the models trained here and of every "
+        "fine-tuning result (finetune/*.json); default OUT/models; a rerun reuses them, "
+        "so a stopped run resumes.",
+    ) = None,
     progress: _opt(bool, "Show progress bars.") = True,
 ) -> None:
     """Test C: forearm model on the end-effector, fine-tuning, synthetic pretraining, curve."""
@@ -196,22 +269,43 @@ def transfer_command(
     try:
         base = QUICK_SETTINGS if quick else TransferSettings()
         sizes = None if curve is None else _counts(curve)
-        changes = {"finetune_epochs": epochs, "pretrain_epochs": pretrain_epochs,
-                   "curve_sizes": sizes}  # fmt: skip
+        changes = {
+            "finetune_epochs": epochs,
+            "pretrain_epochs": pretrain_epochs,
+            "curve_sizes": sizes,
+        }
         if classifier is not None and not classification:
-            raise ConfigError("--classifier with --no-classification: nothing would use it. "
-                              "Fix: drop one of them")  # fmt: skip
-        s = dataclasses.replace(base, seed=seed, segmentation=segmentation or segmenter is not None,
-                                classification=classification, precision=precision,
-                                keep_scale=keep_scale, device=device,
-                                **{k: v for k, v in changes.items() if v is not None})
+            raise ConfigError(
+                "--classifier with --no-classification: nothing would use it. Fix: drop one of them"
+            )
+        s = dataclasses.replace(
+            base,
+            seed=seed,
+            segmentation=segmentation or segmenter is not None,
+            classification=classification,
+            precision=precision,
+            keep_scale=keep_scale,
+            device=device,
+            **{k: v for k, v in changes.items() if v is not None},
+        )
         counts = {"n_target": n_target, "n_pretrain": n_pretrain, "n_source": n_source}
-        plan = dataclasses.replace(QUICK_DATA if quick else DataPlan(), workers=workers,
-                                   **{k: v for k, v in counts.items() if v is not None})
-        result = run_transfer_experiment(out, s=s, plan=plan, source=source, target=target,
-                                         pretrain=pretrain_data, classifier=classifier,
-                                         segmenter=segmenter, models_dir=models,
-                                         progress=progress)  # fmt: skip
+        plan = dataclasses.replace(
+            QUICK_DATA if quick else DataPlan(),
+            workers=workers,
+            **{k: v for k, v in counts.items() if v is not None},
+        )
+        result = run_transfer_experiment(
+            out,
+            s=s,
+            plan=plan,
+            source=source,
+            target=target,
+            pretrain=pretrain_data,
+            classifier=classifier,
+            segmenter=segmenter,
+            models_dir=models,
+            progress=progress,
+        )
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     typer.echo(f"report written to {result['report']}")

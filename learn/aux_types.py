@@ -31,8 +31,9 @@ from tactile.errors import ConfigError
 HAND_TYPE = "hand"
 
 
-def type_targets(data_path: str | Path, indices: np.ndarray, is_hand: np.ndarray
-                 ) -> tuple[np.ndarray, tuple[str, ...]]:  # fmt: skip
+def type_targets(
+    data_path: str | Path, indices: np.ndarray, is_hand: np.ndarray
+) -> tuple[np.ndarray, tuple[str, ...]]:
     """Type ids (S,) int64 and type names of samples ``indices`` (S,) of a handskin dataset.
 
     is_hand : (S,) bool, the samples' class. Hands get id 0 (`HAND_TYPE`); a non-hand sample
@@ -59,8 +60,10 @@ def last_linear(model: nn.Module) -> nn.Linear:
     """The classifier's output layer: its last ``nn.Linear`` module."""
     linears = [m for m in model.modules() if isinstance(m, nn.Linear)]
     if not linears:
-        raise ConfigError(f"{type(model).__name__} has no linear output layer for the type head. "
-                          "Fix: aux_types_weight = 0")  # fmt: skip
+        raise ConfigError(
+            f"{type(model).__name__} has no linear output layer for the type head. "
+            "Fix: aux_types_weight = 0"
+        )
     return linears[-1]
 
 

@@ -34,9 +34,12 @@ FORCE_EDGES_N: tuple[float, ...] = (0, 5, 10, 20, 40)
 
 
 def accuracy_by_bins(
-    pred: np.ndarray, truth: np.ndarray, values: np.ndarray,
-    class_names: Sequence[str], edges: Sequence[float],
-) -> list[dict[str, object]]:  # fmt: skip
+    pred: np.ndarray,
+    truth: np.ndarray,
+    values: np.ndarray,
+    class_names: Sequence[str],
+    edges: Sequence[float],
+) -> list[dict[str, object]]:
     """Per bin ``[lo, hi)`` of ``values``: samples and accuracy (fraction) of each true class.
 
     pred, truth : (S,) int class ids; values : (S,) a number per sample (active taxels, press
@@ -46,8 +49,9 @@ def accuracy_by_bins(
     """
     pred, truth, values = (np.asarray(a).ravel() for a in (pred, truth, values))
     if not len(pred) == len(truth) == len(values):
-        raise ValueError(f"pred, truth and values differ in length: "
-                         f"{len(pred)}, {len(truth)}, {len(values)}")  # fmt: skip
+        raise ValueError(
+            f"pred, truth and values differ in length: {len(pred)}, {len(truth)}, {len(values)}"
+        )
     rows = []
     for lo, hi in pairwise([*edges, None]):
         in_bin = (values >= lo) & (True if hi is None else values < hi)
@@ -56,15 +60,24 @@ def accuracy_by_bins(
             m = in_bin & (truth == c)
             acc = float(np.mean(pred[m] == c)) if m.any() else None
             per_class[name] = {"n": int(m.sum()), "accuracy": acc}
-        rows.append({"lo": plain_scalar(lo), "hi": None if hi is None else plain_scalar(hi),
-                     "n": int(in_bin.sum()), "per_class": per_class})  # fmt: skip
+        rows.append(
+            {
+                "lo": plain_scalar(lo),
+                "hi": None if hi is None else plain_scalar(hi),
+                "n": int(in_bin.sum()),
+                "per_class": per_class,
+            }
+        )
     return rows
 
 
 def accuracy_by_active_taxels(
-    pred: np.ndarray, truth: np.ndarray, n_active: np.ndarray,
-    class_names: Sequence[str], edges: Sequence[int] = EDGES,
-) -> list[dict[str, object]]:  # fmt: skip
+    pred: np.ndarray,
+    truth: np.ndarray,
+    n_active: np.ndarray,
+    class_names: Sequence[str],
+    edges: Sequence[int] = EDGES,
+) -> list[dict[str, object]]:
     """:func:`accuracy_by_bins` of the active-taxel counts ``n_active`` (S,) int."""
     return accuracy_by_bins(pred, truth, n_active, class_names, edges)
 
@@ -91,15 +104,20 @@ def press_forces_n(data_path: str | Path, indices: np.ndarray) -> np.ndarray | N
         return rows_in_order(reader, "force_n", indices).astype(np.float64)
 
 
-def bin_labels(values: np.ndarray, edges: Sequence[float],
-               unit: str) -> tuple[list[str], list[str]]:  # fmt: skip
+def bin_labels(
+    values: np.ndarray, edges: Sequence[float], unit: str
+) -> tuple[list[str], list[str]]:
     """(label of each of ``values`` (S,), the labels in bin order): ``"5–10 N"`` for ``[5, 10)``,
     ``"40+ N"`` for the open last bin, ``"unknown"`` below the first edge or NaN."""
-    names = [f"{lo:g}+ {unit}" if hi is None else f"{lo:g}–{hi:g} {unit}"
-             for lo, hi in pairwise([*edges, None])]  # fmt: skip
+    names = [
+        f"{lo:g}+ {unit}" if hi is None else f"{lo:g}–{hi:g} {unit}"
+        for lo, hi in pairwise([*edges, None])
+    ]
     k = np.searchsorted(np.asarray(edges, float), np.asarray(values, float), side="right") - 1
-    labels = [names[j] if j >= 0 and np.isfinite(v) else "unknown"
-              for j, v in zip(k.tolist(), np.asarray(values, float).tolist(), strict=True)]
+    labels = [
+        names[j] if j >= 0 and np.isfinite(v) else "unknown"
+        for j, v in zip(k.tolist(), np.asarray(values, float).tolist(), strict=True)
+    ]
     return labels, names
 
 
@@ -114,8 +132,9 @@ def active_taxel_counts(data_path: str | Path, indices: np.ndarray) -> np.ndarra
         return (p > active_threshold_pa(reader)).sum(axis=1).astype(np.int64)
 
 
-def breakdown_markdown(rows: list[dict], title: str = "active taxels",
-                       unit: str | None = None) -> list[str]:  # fmt: skip
+def breakdown_markdown(
+    rows: list[dict], title: str = "active taxels", unit: str | None = None
+) -> list[str]:
     """A markdown table of :func:`accuracy_by_bins` (accuracy in %), first column ``title``:
     count bins ``10–19`` (``unit`` None), or half-open bins of a measure ``5–10 N``."""
     names = list(rows[0]["per_class"]) if rows else []
@@ -134,22 +153,30 @@ def breakdown_markdown(rows: list[dict], title: str = "active taxels",
     return lines
 
 
-def accuracy_by_group(pred: np.ndarray, truth: np.ndarray,
-                      groups: Sequence[str]) -> list[dict[str, object]]:  # fmt: skip
+def accuracy_by_group(
+    pred: np.ndarray, truth: np.ndarray, groups: Sequence[str]
+) -> list[dict[str, object]]:
     """Samples, errors and accuracy (fraction) of every group, least accurate first (ties by name).
 
     pred, truth : (S,) int class ids; groups : (S,) str group of each sample.
     """
     pred, truth, groups = np.asarray(pred).ravel(), np.asarray(truth).ravel(), np.asarray(groups)
     if not len(pred) == len(truth) == len(groups):
-        raise ValueError(f"pred, truth and groups differ in length: "
-                         f"{len(pred)}, {len(truth)}, {len(groups)}")  # fmt: skip
+        raise ValueError(
+            f"pred, truth and groups differ in length: {len(pred)}, {len(truth)}, {len(groups)}"
+        )
     rows = []
     for g in np.unique(groups):
         m = groups == g
         ok = int(np.sum(pred[m] == truth[m]))
-        rows.append({"group": str(g), "n": int(m.sum()), "errors": int(m.sum()) - ok,
-                     "accuracy": ok / int(m.sum())})  # fmt: skip
+        rows.append(
+            {
+                "group": str(g),
+                "n": int(m.sum()),
+                "errors": int(m.sum()) - ok,
+                "accuracy": ok / int(m.sum()),
+            }
+        )
     return sorted(rows, key=lambda r: (r["accuracy"], r["group"]))
 
 
@@ -173,8 +200,17 @@ def contactor_types(data_path: str | Path, indices: np.ndarray) -> list[str]:
 
 
 #: Groups of hand samples by the hand parts that press (`hand_parts_group`), in table order.
-HAND_PART_GROUPS: tuple[str, ...] = ("no part", "palm only", "one finger", "palm + one finger",
-                                     "two fingers", "3 parts", "4 parts", "5 parts", "6 parts")
+HAND_PART_GROUPS: tuple[str, ...] = (
+    "no part",
+    "palm only",
+    "one finger",
+    "palm + one finger",
+    "two fingers",
+    "3 parts",
+    "4 parts",
+    "5 parts",
+    "6 parts",
+)
 
 
 def hand_parts_group(parts: set[int] | frozenset[int], palm: int = 6) -> str:
@@ -215,18 +251,26 @@ def hand_parts_groups(data_path: str | Path, indices: np.ndarray) -> list[str | 
     palm = CLASS_NAMES.index("palm")
     for j, pos in enumerate(order):
         if hand[j]:
-            out[pos] = ("unknown" if labels is None
-                        else hand_parts_group(set(labels[j][active[j]].tolist()), palm))
+            out[pos] = (
+                "unknown"
+                if labels is None
+                else hand_parts_group(set(labels[j][active[j]].tolist()), palm)
+            )
     return out
 
 
-def hands_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[str | None],
-                   order: Sequence[str] | None = None) -> list[dict[str, object]]:  # fmt: skip
+def hands_by_group(
+    pred: np.ndarray,
+    truth: np.ndarray,
+    groups: Sequence[str | None],
+    order: Sequence[str] | None = None,
+) -> list[dict[str, object]]:
     """`accuracy_by_group` over the samples whose group is not None (hand samples); rows in
     ``order`` (groups not in it last) or, without ``order``, least accurate first."""
     keep = np.flatnonzero([g is not None for g in groups])
-    rows = accuracy_by_group(np.asarray(pred).ravel()[keep], np.asarray(truth).ravel()[keep],
-                             [groups[k] for k in keep])  # fmt: skip
+    rows = accuracy_by_group(
+        np.asarray(pred).ravel()[keep], np.asarray(truth).ravel()[keep], [groups[k] for k in keep]
+    )
     if order is not None:
         rank = {g: i for i, g in enumerate(order)}
         rows.sort(key=lambda r: (rank.get(r["group"], len(rank)), r["group"]))
@@ -236,15 +280,20 @@ def hands_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[str | N
 def group_markdown(rows: list[dict], title: str = "contactor") -> list[str]:
     """A markdown table of :func:`accuracy_by_group` (accuracy in %), first column ``title``."""
     lines = [f"| {title} | samples | errors | accuracy % |", "|---|---|---|---|"]
-    lines += [f"| {r['group']} | {r['n']} | {r['errors']} | {100 * r['accuracy']:.1f} |"
-              for r in rows]  # fmt: skip
+    lines += [
+        f"| {r['group']} | {r['n']} | {r['errors']} | {100 * r['accuracy']:.1f} |" for r in rows
+    ]
     return lines
 
 
-def segmentation_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[str],
-                          num_classes: int, by_name: bool = False,
-                          order: Sequence[str] | None = None,
-                          ) -> list[dict[str, object]]:  # fmt: skip
+def segmentation_by_group(
+    pred: np.ndarray,
+    truth: np.ndarray,
+    groups: Sequence[str],
+    num_classes: int,
+    by_name: bool = False,
+    order: Sequence[str] | None = None,
+) -> list[dict[str, object]]:
     """Per group: samples, pixel accuracy and mIoU (fractions) of the group's pooled confusion
     matrix (Long et al.; classes absent from the group's ground truth skipped), lowest mIoU
     first (``by_name``: in the groups' sorted order; ``order``: in that order, other groups
@@ -258,14 +307,21 @@ def segmentation_by_group(pred: np.ndarray, truth: np.ndarray, groups: Sequence[
 
     groups = np.asarray(groups)
     if not len(pred) == len(truth) == len(groups):
-        raise ValueError(f"pred, truth and groups differ in length: "
-                         f"{len(pred)}, {len(truth)}, {len(groups)}")  # fmt: skip
+        raise ValueError(
+            f"pred, truth and groups differ in length: {len(pred)}, {len(truth)}, {len(groups)}"
+        )
     pred, truth, rows = torch.as_tensor(pred), torch.as_tensor(truth), []
     for g in np.unique(groups):
         m = torch.from_numpy(np.flatnonzero(groups == g))
         cm = M.confusion_matrix(truth[m], pred[m], num_classes)
-        rows.append({"group": str(g), "n": len(m), "pixel_accuracy": M.accuracy(cm),
-                     "mean_iou": M.mean_iou(cm)})  # fmt: skip
+        rows.append(
+            {
+                "group": str(g),
+                "n": len(m),
+                "pixel_accuracy": M.accuracy(cm),
+                "mean_iou": M.mean_iou(cm),
+            }
+        )
     if order is not None:
         rank = {g: i for i, g in enumerate(order)}
         return sorted(rows, key=lambda r: (rank.get(r["group"], len(rank)), r["group"]))
@@ -295,16 +351,22 @@ def action_names(data_path: str | Path, indices: np.ndarray) -> list[str]:
 def segmentation_group_markdown(rows: list[dict], title: str) -> list[str]:
     """A markdown table of :func:`segmentation_by_group` (scores in %), first column ``title``."""
     lines = [f"| {title} | images | pixel accuracy % | mIoU % |", "|---|---|---|---|"]
-    lines += [f"| {r['group']} | {r['n']} | {100 * r['pixel_accuracy']:.1f} | "
-              f"{100 * r['mean_iou']:.1f} |" for r in rows]  # fmt: skip
+    lines += [
+        f"| {r['group']} | {r['n']} | {100 * r['pixel_accuracy']:.1f} | {100 * r['mean_iou']:.1f} |"
+        for r in rows
+    ]
     return lines
 
 
 def misclassified(
-    pred: np.ndarray, truth: np.ndarray, confidence: np.ndarray, indices: Sequence[int],
-    class_names: Sequence[str], about: dict[str, Sequence] | None = None,
+    pred: np.ndarray,
+    truth: np.ndarray,
+    confidence: np.ndarray,
+    indices: Sequence[int],
+    class_names: Sequence[str],
+    about: dict[str, Sequence] | None = None,
     confidence_name: str = "probability",
-) -> list[dict[str, object]]:  # fmt: skip
+) -> list[dict[str, object]]:
     """The wrongly classified samples, most confident first: where a classifier is sure and
     wrong. pred, truth : (S,) int class ids; confidence : (S,) how sure the classifier was of
     its prediction, larger surer (a network's softmax probability 0..1, an SVM's margin);
@@ -317,16 +379,27 @@ def misclassified(
     wrong = np.flatnonzero(pred != truth)
     wrong = wrong[np.argsort(-confidence[wrong], kind="stable")]
     about = about or {}
-    return [{"index": int(indices[k]), "true": class_names[truth[k]],
-             "predicted": class_names[pred[k]], confidence_name: float(confidence[k]),
-             **{name: plain_scalar(values[k]) for name, values in about.items()}}
-            for k in wrong]  # fmt: skip
+    return [
+        {
+            "index": int(indices[k]),
+            "true": class_names[truth[k]],
+            "predicted": class_names[pred[k]],
+            confidence_name: float(confidence[k]),
+            **{name: plain_scalar(values[k]) for name, values in about.items()},
+        }
+        for k in wrong
+    ]
 
 
 def classifier_breakdown(
-    data_path: str | Path, indices: np.ndarray, pred: np.ndarray, truth: np.ndarray,
-    confidence: np.ndarray, class_names: Sequence[str], confidence_name: str = "probability",
-) -> dict[str, object]:  # fmt: skip
+    data_path: str | Path,
+    indices: np.ndarray,
+    pred: np.ndarray,
+    truth: np.ndarray,
+    confidence: np.ndarray,
+    class_names: Sequence[str],
+    confidence_name: str = "probability",
+) -> dict[str, object]:
     """A classifier's report fields on a handskin dataset's test samples ``indices`` (S,):
     ``by_active_taxels``, ``by_force`` (press force bins `FORCE_EDGES_N`, N; None without the
     dataset's ``force_n``), ``by_contactor``, the hand samples' accuracy by the hand parts that
@@ -341,30 +414,51 @@ def classifier_breakdown(
     forces = press_forces_n(data_path, indices)
     return {
         "by_active_taxels": accuracy_by_active_taxels(pred, truth, n_active, class_names),
-        "by_force": (None if forces is None
-                     else accuracy_by_bins(pred, truth, forces, class_names, FORCE_EDGES_N)),
+        "by_force": (
+            None
+            if forces is None
+            else accuracy_by_bins(pred, truth, forces, class_names, FORCE_EDGES_N)
+        ),
         "by_contactor": accuracy_by_group(pred, truth, contactors),
         "hands_by_parts": hands_by_group(pred, truth, parts, HAND_PART_GROUPS),
         "hands_by_action": hands_by_group(pred, truth, hand_actions),
-        "errors": misclassified(pred, truth, confidence, indices, class_names,
-                                {"contactor": contactors, "active taxels": n_active.tolist(),
-                                 "action": actions, "hand parts": parts},
-                                confidence_name)}  # fmt: skip
+        "errors": misclassified(
+            pred,
+            truth,
+            confidence,
+            indices,
+            class_names,
+            {
+                "contactor": contactors,
+                "active taxels": n_active.tolist(),
+                "action": actions,
+                "hand parts": parts,
+            },
+            confidence_name,
+        ),
+    }
 
 
 def segmenter_breakdown(
-    data_path: str | Path, indices: np.ndarray, pred: np.ndarray, truth: np.ndarray,
-    num_classes: int, actions: Sequence[str], parts: Sequence[str],
-) -> dict[str, list[dict[str, object]]]:  # fmt: skip
+    data_path: str | Path,
+    indices: np.ndarray,
+    pred: np.ndarray,
+    truth: np.ndarray,
+    num_classes: int,
+    actions: Sequence[str],
+    parts: Sequence[str],
+) -> dict[str, list[dict[str, object]]]:
     """A segmenter's scores (`segmentation_by_group`) on a handskin dataset's test images
     ``indices`` (S,) — pred, truth (S, h, w) class ids — by contactor, by action (``actions``
     (S,), `action_names`), by hand parts touching (``parts`` (S,), counts as text) and, when the
     dataset has ``force_n``, by press force (bins `FORCE_EDGES_N`, N, in order)."""
-    out = {"contactor": segmentation_by_group(pred, truth, contactor_types(data_path, indices),
-                                              num_classes),
-           "action": segmentation_by_group(pred, truth, actions, num_classes),
-           "hand parts touching": segmentation_by_group(pred, truth, parts, num_classes,
-                                                        by_name=True)}  # fmt: skip
+    out = {
+        "contactor": segmentation_by_group(
+            pred, truth, contactor_types(data_path, indices), num_classes
+        ),
+        "action": segmentation_by_group(pred, truth, actions, num_classes),
+        "hand parts touching": segmentation_by_group(pred, truth, parts, num_classes, by_name=True),
+    }
     forces = press_forces_n(data_path, indices)
     if forces is not None:
         labels, order = bin_labels(forces, FORCE_EDGES_N, "N")

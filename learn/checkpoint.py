@@ -157,6 +157,8 @@ def check_no_overwrite(out: str | Path, resume: bool) -> None:
     if resume or not ((out / LAST).is_file() or (out / BEST).is_file()):
         return
     held = load_checkpoint(out / LAST if (out / LAST).is_file() else out / BEST)
-    raise ConfigError(f"{out} already holds a run ({held['config']['model']['arch']}, "
-                      f"{held['epoch']} epoch(s) done); training afresh would write over it. "
-                      "Fix: --resume to continue it, or another --out (or delete that folder)")
+    raise ConfigError(
+        f"{out} already holds a run ({held['config']['model']['arch']}, "
+        f"{held['epoch']} epoch(s) done); training afresh would write over it. "
+        "Fix: --resume to continue it, or another --out (or delete that folder)"
+    )

@@ -28,8 +28,10 @@ from tactile.errors import ConfigError, DataError
 CLASSICAL = ("bovw", "vgg_svm")
 MODEL_FILE = "model.npz"  # file name in a run folder
 DEFAULT_SIZE = (68, 100)  # (h, w) px: the paper's network input, also used for BoVW
-TIMING = {"bovw": "image → label: descriptors, visual words, SVM",
-          "vgg_svm": "image → label: VGG16 features (float, eval mode), SVM"}  # fmt: skip
+TIMING = {
+    "bovw": "image → label: descriptors, visual words, SVM",
+    "vgg_svm": "image → label: VGG16 features (float, eval mode), SVM",
+}
 
 
 @dataclass(frozen=True)
@@ -44,8 +46,11 @@ class LinearSvm:
     @classmethod
     def from_sklearn(cls, svc) -> LinearSvm:
         """The arrays of a fitted ``sklearn.svm.LinearSVC``."""
-        return cls(np.asarray(svc.coef_, np.float64), np.asarray(svc.intercept_, np.float64),
-                   np.asarray(svc.classes_, np.int64))  # fmt: skip
+        return cls(
+            np.asarray(svc.coef_, np.float64),
+            np.asarray(svc.intercept_, np.float64),
+            np.asarray(svc.classes_, np.int64),
+        )
 
     def decision_function(self, features: np.ndarray) -> np.ndarray:
         """Scores of ``features`` (S, D): (S,) for two classes, (S, C) otherwise."""
@@ -64,8 +69,7 @@ class LinearSvm:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """``{"svm_coef", "svm_intercept", "svm_classes"}`` for :func:`save_npz`."""
-        return {"svm_coef": self.coef, "svm_intercept": self.intercept,
-                "svm_classes": self.classes}  # fmt: skip
+        return {"svm_coef": self.coef, "svm_intercept": self.intercept, "svm_classes": self.classes}
 
     @classmethod
     def from_arrays(cls, arrays: Mapping[str, np.ndarray]) -> LinearSvm:
@@ -87,18 +91,23 @@ def load_npz(path: str | Path) -> tuple[dict, dict[str, np.ndarray]]:
     """(meta, arrays) of a model file; DataError naming the file and the fix."""
     path = Path(path)
     if not path.is_file():
-        raise DataError(f"no model file at {path}. Fix: give a model.npz written by "
-                        "handskin train --arch bovw or --arch vgg_svm")  # fmt: skip
+        raise DataError(
+            f"no model file at {path}. Fix: give a model.npz written by "
+            "handskin train --arch bovw or --arch vgg_svm"
+        )
     try:
         with np.load(path, allow_pickle=False) as npz:
             arrays = {k: npz[k] for k in npz.files}
         meta = json.loads(str(arrays.pop("meta")))
     except (OSError, ValueError, KeyError) as err:
-        raise DataError(f"{path} is not a handskin classical model ({err}). Fix: write it "
-                        "with handskin train --arch bovw or --arch vgg_svm") from err
+        raise DataError(
+            f"{path} is not a handskin classical model ({err}). Fix: write it "
+            "with handskin train --arch bovw or --arch vgg_svm"
+        ) from err
     if meta.get("kind") not in CLASSICAL:
-        raise DataError(f"{path}: unknown model kind {meta.get('kind')!r}; "
-                        f"known: {', '.join(CLASSICAL)}")  # fmt: skip
+        raise DataError(
+            f"{path}: unknown model kind {meta.get('kind')!r}; known: {', '.join(CLASSICAL)}"
+        )
     return meta, arrays
 
 
@@ -115,9 +124,15 @@ def load_classical(path: str | Path):
     return model
 
 
-def split_images(data: str | Path, split: str, size: tuple[int, int],
-                 hand_classes=None, seed: int = 0, progress: bool = False,
-                 return_indices: bool = False):  # fmt: skip
+def split_images(
+    data: str | Path,
+    split: str,
+    size: tuple[int, int],
+    hand_classes=None,
+    seed: int = 0,
+    progress: bool = False,
+    return_indices: bool = False,
+):
     """(images (S, h, w) float32 in [0, 1], labels (S,) int64, class names) of ``split`` of a
     dataset or image folder (the networks' reader: ``learn.folder.open_split``), and with
     ``return_indices`` the samples' dataset indices (S,) int64 as a fourth item."""
@@ -136,8 +151,9 @@ def confusion(labels: np.ndarray, pred: np.ndarray, n_classes: int) -> np.ndarra
     return np.bincount(flat, minlength=n_classes**2).reshape(n_classes, n_classes)
 
 
-def make_model(arch: str, data, out: Path, table: Mapping, *, seed: int, init, epochs,
-               progress: bool):  # fmt: skip
+def make_model(
+    arch: str, data, out: Path, table: Mapping, *, seed: int, init, epochs, progress: bool
+):
     """An unfitted model and its input size (h, w) px. ``table``: config keys (BovwConfig /
     VggSvmConfig fields, and ``input_size`` for BoVW). vgg_svm: features of the VGG16 checkpoint
     ``init``, or of the vgg16 preset trained here into ``out/vgg16`` (``epochs``, ``seed``)."""
@@ -160,15 +176,29 @@ def make_model(arch: str, data, out: Path, table: Mapping, *, seed: int, init, e
     if "input_size" in table:
         raise ConfigError("input_size is set by the VGG16 checkpoint for vgg_svm; remove it")
     cfg = from_dict(VggSvmConfig, table)
-    ckpt = init if init is not None else ensure_model(
-        "vgg16", data, out, epochs=epochs, seed=seed, progress=progress, name="vgg16")
+    ckpt = (
+        init
+        if init is not None
+        else ensure_model(
+            "vgg16", data, out, epochs=epochs, seed=seed, progress=progress, name="vgg16"
+        )
+    )
     model = VggSvmClassifier.from_checkpoint(ckpt, cfg, seed=seed)
     return model, model.input_size
 
 
-def train_classical(arch: str, data: str | Path, out: str | Path, *, seed: int = 0,
-                    hand_classes=None, init=None, epochs: int | None = None,
-                    config: Mapping | None = None, progress: bool = True) -> dict:  # fmt: skip
+def train_classical(
+    arch: str,
+    data: str | Path,
+    out: str | Path,
+    *,
+    seed: int = 0,
+    hand_classes=None,
+    init=None,
+    epochs: int | None = None,
+    config: Mapping | None = None,
+    progress: bool = True,
+) -> dict:
     """Fit ``arch`` (bovw | vgg_svm) on the train split, save ``out/model.npz`` and
     ``out/test_metrics.json``; returns the report dict (config, versions, seed, test scores)."""
     from learn.checkpoint import versions
@@ -177,48 +207,90 @@ def train_classical(arch: str, data: str | Path, out: str | Path, *, seed: int =
     if arch not in CLASSICAL:
         raise ConfigError(f"unknown classical arch {arch!r}; choose one of: {', '.join(CLASSICAL)}")
     out = Path(out)
-    model, size = make_model(arch, data, out, config or {}, seed=seed, init=init, epochs=epochs,
-                             progress=progress)  # fmt: skip
+    model, size = make_model(
+        arch, data, out, config or {}, seed=seed, init=init, epochs=epochs, progress=progress
+    )
     x, y, names = split_images(data, "train", size, hand_classes, seed, progress)
     model.fit(x, y)
-    desc = {"path": str(data), "hand_classes": None if hand_classes is None else
-            list(hand_classes), "n_train": len(y)}  # fmt: skip
+    desc = {
+        "path": str(data),
+        "hand_classes": None if hand_classes is None else list(hand_classes),
+        "n_train": len(y),
+    }
     cfg, arrays = model.to_arrays()
-    meta = {"kind": arch, "config": cfg, "input_size": list(size), "class_names": list(names),
-            "seed": seed, "versions": versions(), "data": desc,
-            "ancestry": getattr(model, "learned_from", [])}  # vgg_svm: its VGG16's # fmt: skip
+    meta = {
+        "kind": arch,
+        "config": cfg,
+        "input_size": list(size),
+        "class_names": list(names),
+        "seed": seed,
+        "versions": versions(),
+        "data": desc,
+        "ancestry": getattr(model, "learned_from", []),
+    }  # vgg_svm: its VGG16's
     save_npz(out / MODEL_FILE, meta, arrays)
     x, y, _ = split_images(data, "test", size, hand_classes, seed, progress)
     cm = confusion(y, model.predict(x), len(names))
-    report = {"config": cfg, "versions": meta["versions"], "seed": seed, "data": desc,
-              "test_metrics": metrics_from_cm(cm), "test_confusion": cm.tolist()}  # fmt: skip
+    report = {
+        "config": cfg,
+        "versions": meta["versions"],
+        "seed": seed,
+        "data": desc,
+        "test_metrics": metrics_from_cm(cm),
+        "test_confusion": cm.tolist(),
+    }
     (out / "test_metrics.json").write_text(json.dumps(report, indent=1))
     return report
 
 
-def train_checked(arch: str, data, out: Path, *, config_path: Path | None = None,
-                  seed: int | None = None, hand_classes=None, init: Path | None = None,
-                  epochs: int | None = None, unused: Mapping[str, object] | None = None,
-                  progress: bool = True) -> dict:  # fmt: skip
+def train_checked(
+    arch: str,
+    data,
+    out: Path,
+    *,
+    config_path: Path | None = None,
+    seed: int | None = None,
+    hand_classes=None,
+    init: Path | None = None,
+    epochs: int | None = None,
+    unused: Mapping[str, object] | None = None,
+    progress: bool = True,
+) -> dict:
     """``handskin train --arch bovw|vgg_svm``: options checked (``unused``: option name → value
     of the network-only options, which must be None), then :func:`train_classical`."""
     from tactile.config import read_toml
 
     given = [name for name, value in (unused or {}).items() if value is not None]
     if given:
-        raise ConfigError(f"{given[0]} does not apply to --arch {arch} (no gradient training); "
-                          "remove it")  # fmt: skip
+        raise ConfigError(
+            f"{given[0]} does not apply to --arch {arch} (no gradient training); remove it"
+        )
     if arch == "bovw" and (init is not None or epochs is not None):
         raise ConfigError("--init and --epochs apply to --arch vgg_svm only; remove them")
     if init is not None and epochs is not None:
         raise ConfigError("--epochs trains a vgg16 when no --init is given; give one of the two")
     table = read_toml(config_path) if config_path is not None else {}
-    return train_classical(arch, data, out, seed=seed or 0, hand_classes=hand_classes,
-                           init=init, epochs=epochs, config=table, progress=progress)  # fmt: skip
+    return train_classical(
+        arch,
+        data,
+        out,
+        seed=seed or 0,
+        hand_classes=hand_classes,
+        init=init,
+        epochs=epochs,
+        config=table,
+        progress=progress,
+    )
 
 
-def ms_per_image(model, images: np.ndarray, threads: int = 1, n_runs: int = 100,
-                 rounds: int = 3, n_warmup: int = 10) -> float:  # fmt: skip
+def ms_per_image(
+    model,
+    images: np.ndarray,
+    threads: int = 1,
+    n_runs: int = 100,
+    rounds: int = 3,
+    n_warmup: int = 10,
+) -> float:
     """CPU ms per image of ``model.predict`` at batch 1 (image k of ``images`` (S, h, w) at run
     k of a round, cycling) with ``threads`` torch threads: the least, over ``rounds`` rounds, of
     the median of ``n_runs`` runs after ``n_warmup`` warm-up runs — as networks are timed
@@ -246,8 +318,15 @@ def ms_per_image(model, images: np.ndarray, threads: int = 1, n_runs: int = 100,
     return 1e3 * best
 
 
-def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None, threads: int = 1,
-                       time_runs: int = 100, time_rounds: int = 3) -> dict:  # fmt: skip
+def evaluate_classical(
+    path: str | Path,
+    data: str | Path,
+    *,
+    hand_classes=None,
+    threads: int = 1,
+    time_runs: int = 100,
+    time_rounds: int = 3,
+) -> dict:
     """Test-split scores and CPU ms/image of a classical model file; a row of
     ``learn.eval_report.write_report`` (the same keys as ``evaluate_checkpoint``'s; on a
     handskin dataset, with accuracy by contact size and contactor, and the errors ranked by
@@ -260,26 +339,46 @@ def evaluate_classical(path: str | Path, data: str | Path, *, hand_classes=None,
     model = load_classical(path)
     meta = model.meta
     hand = hand_classes or meta["data"].get("hand_classes")
-    x, y, names, indices = split_images(data, "test", meta["input_size"], hand, meta["seed"],
-                                        return_indices=True)  # fmt: skip
+    x, y, names, indices = split_images(
+        data, "test", meta["input_size"], hand, meta["seed"], return_indices=True
+    )
     if list(names) != list(meta["class_names"]):
-        raise DataError(f"{data} has classes {list(names)}; {path} was trained on "
-                        f"{meta['class_names']}. Fix: the same kind of data (or --hand-classes)")
+        raise DataError(
+            f"{data} has classes {list(names)}; {path} was trained on "
+            f"{meta['class_names']}. Fix: the same kind of data (or --hand-classes)"
+        )
     svm_scores = model.decision_function(x)
     pred = model.svm_or_fail().classes_of(svm_scores)
-    found = (classifier_breakdown(data, indices, pred, y, svm_margin(svm_scores), list(names),
-                                  "margin")
-             if is_dataset(data) else {})  # fmt: skip
+    found = (
+        classifier_breakdown(data, indices, pred, y, svm_margin(svm_scores), list(names), "margin")
+        if is_dataset(data)
+        else {}
+    )
     cm = confusion(y, pred, len(names))
     scores = metrics_from_cm(cm)
     ms = ms_per_image(model, x, threads, time_runs, time_rounds)
-    return {"checkpoint": str(path), "arch": meta["kind"], "task": "classify", "epoch": None,
-            "class_names": list(meta["class_names"]), "n_test": len(y), "cm": cm.tolist(),
-            "metrics": scores, "fast_metrics": scores, "bf16": False,
-            "ms_per_image": {"fast": ms, "gpu": None}, "timing": TIMING[meta["kind"]],
-            "threads": threads, "time_runs": time_runs, "time_rounds": time_rounds,
-            "seed": meta["seed"], "config": meta["config"],
-            "input_size": meta["input_size"], "train_versions": meta["versions"],
-            "train_data": meta.get("data"), "test_data": str(data),
-            "shared_with_training": shared_with_training(meta, data),
-            **found}  # fmt: skip
+    return {
+        "checkpoint": str(path),
+        "arch": meta["kind"],
+        "task": "classify",
+        "epoch": None,
+        "class_names": list(meta["class_names"]),
+        "n_test": len(y),
+        "cm": cm.tolist(),
+        "metrics": scores,
+        "fast_metrics": scores,
+        "bf16": False,
+        "ms_per_image": {"fast": ms, "gpu": None},
+        "timing": TIMING[meta["kind"]],
+        "threads": threads,
+        "time_runs": time_runs,
+        "time_rounds": time_rounds,
+        "seed": meta["seed"],
+        "config": meta["config"],
+        "input_size": meta["input_size"],
+        "train_versions": meta["versions"],
+        "train_data": meta.get("data"),
+        "test_data": str(data),
+        "shared_with_training": shared_with_training(meta, data),
+        **found,
+    }

@@ -40,8 +40,7 @@ def resolve_run(arch: str, config: Path | None, overrides: dict, test_c: bool):
     from learn.train import RunConfig, load_run_config, replace_train
 
     if arch not in PRESETS:
-        raise ConfigError(f"unknown arch {arch!r}; choose one of: "
-                          f"{', '.join(PRESETS + CLASSICAL)}")  # fmt: skip
+        raise ConfigError(f"unknown arch {arch!r}; choose one of: {', '.join(PRESETS + CLASSICAL)}")
     preset = C.PRESET_OF_ARCH[arch]
     run = RunConfig(model=preset.model, train=C.FINETUNE_TEST_C if test_c else preset.train)
     run = load_run_config(config, run) if config is not None else run
@@ -58,8 +57,10 @@ def parse_canvas(text: str) -> tuple[float, float]:
     except ValueError:
         h = w = float("nan")
     if not (h > 0 and w > 0):
-        raise ConfigError(f"--canvas-mm {text!r}: give the canvas as H,W in mm, both > 0, e.g. "
-                          "229,383 (the forearm map)")
+        raise ConfigError(
+            f"--canvas-mm {text!r}: give the canvas as H,W in mm, both > 0, e.g. "
+            "229,383 (the forearm map)"
+        )
     return h, w
 
 
@@ -98,54 +99,93 @@ def _opt(kind, help_text: str, *names: str):
 
 DataArg = Annotated[Path, typer.Argument(help="Dataset folder (dataset.h5) or image folder.")]
 OutOpt = _opt(Path, "Run folder: checkpoints, curves.png, run.toml.")
-ArchOpt = _opt(str, "handsnet | vgg16 | segnet | fcn16s (its preset configuration), or the "
-               "classical baselines of Table 3: bovw | vgg_svm (OUT/model.npz; no unit).")
-ConfigOpt = _opt(Path | None, "TOML run config: model and train tables and top-level "
-                 "RunConfig keys, laid over the arch's preset (bovw / vgg_svm: top-level "
-                 "BovwConfig / VggSvmConfig keys; bovw also input_size = [h, w] px).")
-EpochsOpt = _opt(int | None, "Epochs (each a pass over every train image in every view: 3 "
-                 "with flips); vgg_svm without --init: epochs of the vgg16 trained first into "
-                 "OUT/vgg16.")
+ArchOpt = _opt(
+    str,
+    "handsnet | vgg16 | segnet | fcn16s (its preset configuration), or the "
+    "classical baselines of Table 3: bovw | vgg_svm (OUT/model.npz; no unit).",
+)
+ConfigOpt = _opt(
+    Path | None,
+    "TOML run config: model and train tables and top-level "
+    "RunConfig keys, laid over the arch's preset (bovw / vgg_svm: top-level "
+    "BovwConfig / VggSvmConfig keys; bovw also input_size = [h, w] px).",
+)
+EpochsOpt = _opt(
+    int | None,
+    "Epochs (each a pass over every train image in every view: 3 "
+    "with flips); vgg_svm without --init: epochs of the vgg16 trained first into "
+    "OUT/vgg16.",
+)
 BatchOpt = _opt(int | None, "Images per optimisation step.")
 LrOpt = _opt(float | None, "Initial learning rate (dimensionless, per step).")
 SeedOpt = _opt(int | None, "Seed of init, shuffling and splits (integer).")
 ValOpt = _opt(float | None, "Share (0-1) of the train split's subjects held out for validation.")
-PrecisionOpt = _opt(str | None, "Number format of the training forward pass: fp32 (the preset) "
-                    "or bf16 (bfloat16 autocast, weights and loss in fp32; about 1.8x faster "
-                    "steps on CPUs with native bf16: AVX512-BF16 or AMX; no unit).")
-DeviceOpt = _opt(str | None, "Where the model trains: cpu (the default; the same seed gives the "
-                 "same weights) or cuda / cuda:N (a GPU, with a CUDA build of torch; for the "
-                 "full-width networks, e.g. width = 1.0 in a run TOML); no unit.")
-HandOpt = _opt(str | None, "Image folders: comma-separated folder names that are 'hand' "
-               "(e.g. hand,finger); default: every folder its own class.")
-InitOpt = _opt(Path | None, "Fine-tune from this checkpoint (.pt file): the tensors whose names "
-               "and shapes fit load, the rest start fresh; segnet / fcn16s: a vgg16 classifier "
-               "of the same width lends its encoder (+2.5 to +7.9 mIoU points on the paper-sized "
-               "set, docs/learning.md); vgg_svm: the vgg16 checkpoint whose features feed the SVM.")
-DistillOpt = _opt(Path | None, "Distil from this trained classifier (.pt file, e.g. a vgg16 "
-                  "best.pt of the same data): the network also learns its flip-averaged "
-                  "probabilities (distill_weight, dimensionless share of the loss, and "
-                  "distill_temperature, dimensionless, in a run TOML).")
-TestCOpt = _opt(bool, "The paper's Test C schedule: lr 0.01 halved at epoch 60 of 120, batch 128 "
-                "images, lr x 0.1 on the first two convolutions.")
-CanvasOpt = _opt(str | None, "Input canvas 'H,W' in mm (e.g. 229,383, the forearm map): each "
-                 "map centred on it (zero-padded or cropped) before the resize, so a mm is the "
-                 "same number of input pixels on any part. Default: stretch each map (paper).")
+PrecisionOpt = _opt(
+    str | None,
+    "Number format of the training forward pass: fp32 (the preset) "
+    "or bf16 (bfloat16 autocast, weights and loss in fp32; about 1.8x faster "
+    "steps on CPUs with native bf16: AVX512-BF16 or AMX; no unit).",
+)
+DeviceOpt = _opt(
+    str | None,
+    "Where the model trains: cpu (the default; the same seed gives the "
+    "same weights) or cuda / cuda:N (a GPU, with a CUDA build of torch; for the "
+    "full-width networks, e.g. width = 1.0 in a run TOML); no unit.",
+)
+HandOpt = _opt(
+    str | None,
+    "Image folders: comma-separated folder names that are 'hand' "
+    "(e.g. hand,finger); default: every folder its own class.",
+)
+InitOpt = _opt(
+    Path | None,
+    "Fine-tune from this checkpoint (.pt file): the tensors whose names "
+    "and shapes fit load, the rest start fresh; segnet / fcn16s: a vgg16 classifier "
+    "of the same width lends its encoder (+2.5 to +7.9 mIoU points on the paper-sized "
+    "set, docs/learning.md); vgg_svm: the vgg16 checkpoint whose features feed the SVM.",
+)
+DistillOpt = _opt(
+    Path | None,
+    "Distil from this trained classifier (.pt file, e.g. a vgg16 "
+    "best.pt of the same data): the network also learns its flip-averaged "
+    "probabilities (distill_weight, dimensionless share of the loss, and "
+    "distill_temperature, dimensionless, in a run TOML).",
+)
+TestCOpt = _opt(
+    bool,
+    "The paper's Test C schedule: lr 0.01 halved at epoch 60 of 120, batch 128 "
+    "images, lr x 0.1 on the first two convolutions.",
+)
+CanvasOpt = _opt(
+    str | None,
+    "Input canvas 'H,W' in mm (e.g. 229,383, the forearm map): each "
+    "map centred on it (zero-padded or cropped) before the resize, so a mm is the "
+    "same number of input pixels on any part. Default: stretch each map (paper).",
+)
 ResumeOpt = _opt(bool, "Continue from OUT/last.pt.")
-StopOpt = _opt(int | None, "Stop once this epoch (1-based, counted from the run's start) is "
-               "done, keeping the schedule of all the epochs, to split a long run; no test "
-               "scores until --resume finishes it (epoch number, no unit).")
-GridOpt = _opt(str | None, "Cross-validate first over a grid, e.g. "
-               "'train.lr=0.01,0.001;train.batch_size=32,64' (each value in its field's unit).")
+StopOpt = _opt(
+    int | None,
+    "Stop once this epoch (1-based, counted from the run's start) is "
+    "done, keeping the schedule of all the epochs, to split a long run; no test "
+    "scores until --resume finishes it (epoch number, no unit).",
+)
+GridOpt = _opt(
+    str | None,
+    "Cross-validate first over a grid, e.g. "
+    "'train.lr=0.01,0.001;train.batch_size=32,64' (each value in its field's unit).",
+)
 FoldsOpt = _opt(int, "Folds of the cross-validation (count).")
-PretrainOpt = _opt(bool | None, "segnet / fcn16s on a handskin dataset: first train a vgg16 "
-                   "hand / non-hand classifier of the same width and seed on the same training "
-                   "images into OUT/vgg16 (20 epochs, lr x 0.2 after 14; 6.2 min on 2 cores for "
-                   "the paper-sized set; reused when there) and start from its encoder, as the "
-                   "paper's segmenters start from a pretrained VGG16. Default: on for a "
-                   "segmenter on a handskin dataset without --init or --cv-grid; "
-                   "--no-pretrain-encoder trains from scratch.",
-                   "--pretrain-encoder/--no-pretrain-encoder")
+PretrainOpt = _opt(
+    bool | None,
+    "segnet / fcn16s on a handskin dataset: first train a vgg16 "
+    "hand / non-hand classifier of the same width and seed on the same training "
+    "images into OUT/vgg16 (20 epochs, lr x 0.2 after 14; 6.2 min on 2 cores for "
+    "the paper-sized set; reused when there) and start from its encoder, as the "
+    "paper's segmenters start from a pretrained VGG16. Default: on for a "
+    "segmenter on a handskin dataset without --init or --cv-grid; "
+    "--no-pretrain-encoder trains from scratch.",
+    "--pretrain-encoder/--no-pretrain-encoder",
+)
 ProgressOpt = _opt(bool, "Show progress bars.")
 
 
@@ -180,32 +220,77 @@ def train_command(
         if init is not None and not init.is_file():
             raise DataError(f"no checkpoint at {init}. Fix: give a .pt file from handskin train")
         if arch in CLASSICAL:
-            unused = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction,
-                      "--precision": precision, "--device": device,
-                      "--test-c": test_c or None, "--distill-from": distill_from,
-                      "--resume": resume or None, "--cv-grid": cv_grid,
-                      "--stop-after-epoch": stop_after_epoch,
-                      "--canvas-mm": canvas_mm,
-                      "--pretrain-encoder": pretrain_encoder or None}  # fmt: skip
-            _train_classical(arch, data, out, config, seed, _hand_classes(hand_classes), init,
-                             epochs, unused, progress)  # fmt: skip
+            unused = {
+                "--batch-size": batch_size,
+                "--lr": lr,
+                "--val-fraction": val_fraction,
+                "--precision": precision,
+                "--device": device,
+                "--test-c": test_c or None,
+                "--distill-from": distill_from,
+                "--resume": resume or None,
+                "--cv-grid": cv_grid,
+                "--stop-after-epoch": stop_after_epoch,
+                "--canvas-mm": canvas_mm,
+                "--pretrain-encoder": pretrain_encoder or None,
+            }
+            _train_classical(
+                arch,
+                data,
+                out,
+                config,
+                seed,
+                _hand_classes(hand_classes),
+                init,
+                epochs,
+                unused,
+                progress,
+            )
             return
-        over = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "seed": seed,
-                "val_fraction": val_fraction, "precision": precision,
-                "device": device,
-                "distill_from": None if distill_from is None else str(distill_from)}  # fmt: skip
+        over = {
+            "epochs": epochs,
+            "batch_size": batch_size,
+            "lr": lr,
+            "seed": seed,
+            "val_fraction": val_fraction,
+            "precision": precision,
+            "device": device,
+            "distill_from": None if distill_from is None else str(distill_from),
+        }
         run = resolve_run(arch, config, over, test_c)
         if canvas_mm is not None:
             model = dataclasses.replace(run.model, canvas_mm=parse_canvas(canvas_mm))
             run = dataclasses.replace(run, model=model)
-        _train(run, data, out, _hand_classes(hand_classes), init, resume, stop_after_epoch,
-               cv_grid, cv_folds, progress, pretrain_encoder)  # fmt: skip
+        _train(
+            run,
+            data,
+            out,
+            _hand_classes(hand_classes),
+            init,
+            resume,
+            stop_after_epoch,
+            cv_grid,
+            cv_folds,
+            progress,
+            pretrain_encoder,
+        )
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
 
 
-def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress,
-           pretrain: bool | None = None) -> None:  # fmt: skip
+def _train(
+    run,
+    data,
+    out,
+    hand,
+    init,
+    resume,
+    stop,
+    cv_grid,
+    cv_folds,
+    progress,
+    pretrain: bool | None = None,
+) -> None:
     from learn.checkpoint import check_no_overwrite, versions
     from learn.crossval import cross_validate, cv_markdown, parse_grid
     from learn.evaluate import evaluate_tensors
@@ -221,9 +306,11 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
         from learn.distill import check_teacher
 
         if cv_grid:
-            raise ConfigError("--distill-from with --cv-grid: the teacher trained on every fold's "
-                              "validation people, so the folds would not be held out. Fix: "
-                              "cross-validate without the teacher, then distil the pick")
+            raise ConfigError(
+                "--distill-from with --cv-grid: the teacher trained on every fold's "
+                "validation people, so the folds would not be held out. Fix: "
+                "cross-validate without the teacher, then distil the pick"
+            )
         teacher = check_teacher(run, data)
     from learn.encoder_start import check_pretrain, wanted
 
@@ -235,8 +322,10 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
         loads, init_ckpt = check_init(run, init, data)
         typer.echo(f"--init {init}: {loads.summary()}")
     if cv_grid and stop is not None:
-        raise ConfigError("--stop-after-epoch with --cv-grid: the grid's pick would be lost on "
-                          "--resume. Fix: cross-validate first, then train the pick in parts")
+        raise ConfigError(
+            "--stop-after-epoch with --cv-grid: the grid's pick would be lost on "
+            "--resume. Fix: cross-validate first, then train the pick in parts"
+        )
     check_stop(stop, run, out, resume)
     check_no_overwrite(out, resume)
     if note := own_split_note(data, test_hands(data) if run.task == "segment" else None):
@@ -244,8 +333,10 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
     if pretrain:  # the checks above passed: now the classifier, then its encoder as the start
         from learn.encoder_start import FOLDER, pretrain_encoder
 
-        typer.echo(f"{run.model.arch}: first a vgg16 classifier in {out / FOLDER}, whose encoder "
-                   "starts it (--no-pretrain-encoder: from scratch)")
+        typer.echo(
+            f"{run.model.arch}: first a vgg16 classifier in {out / FOLDER}, whose encoder "
+            "starts it (--no-pretrain-encoder: from scratch)"
+        )
         init = pretrain_encoder(run, data, out, progress)
         loads, init_ckpt = check_init(run, init, data)
         typer.echo(f"{run.model.arch} starts from the encoder of {init}: {loads.summary()}")
@@ -260,14 +351,30 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
     fitted = _fit_classes(run, loaded)
     teacher = teacher if fitted is run else None  # classes changed: fit checks the teacher again
     run = fitted
-    result = fit(run, loaded, out, resume=resume, init_from=init, progress=progress,
-                 stop_after_epoch=stop, teacher=teacher, init_checkpoint=init_ckpt)  # fmt: skip
+    result = fit(
+        run,
+        loaded,
+        out,
+        resume=resume,
+        init_from=init,
+        progress=progress,
+        stop_after_epoch=stop,
+        teacher=teacher,
+        init_checkpoint=init_ckpt,
+    )
     if result.paused:
-        typer.echo(f"stopped after epoch {stop} of {run.train.epochs} (run in {out}); continue "
-                   "with the same command and --resume, without --stop-after-epoch to finish")
+        typer.echo(
+            f"stopped after epoch {stop} of {run.train.epochs} (run in {out}); continue "
+            "with the same command and --resume, without --stop-after-epoch to finish"
+        )
         return
-    report = {"config": to_dict(run), "versions": versions(), "seed": run.train.seed,
-              "data": loaded.description, "best_val_metric": result.best_metric}  # fmt: skip
+    report = {
+        "config": to_dict(run),
+        "versions": versions(),
+        "seed": run.train.seed,
+        "data": loaded.description,
+        "best_val_metric": result.best_metric,
+    }
     if loaded.test is not None:
         res = evaluate_tensors(result.model, loaded.test, run.model.num_classes)
         report |= {"test_metrics": res.metrics, "test_confusion": res.cm.tolist()}
@@ -280,36 +387,74 @@ def _train_classical(arch, data, out, config, seed, hand, init, epochs, unused, 
     """BoVW or VGG16 + SVM (``learn.classical.train_checked``): OUT/model.npz and metrics."""
     from learn.classical import MODEL_FILE, train_checked
 
-    report = train_checked(arch, data, out, config_path=config, seed=seed, hand_classes=hand,
-                           init=init, epochs=epochs, unused=unused, progress=progress)  # fmt: skip
+    report = train_checked(
+        arch,
+        data,
+        out,
+        config_path=config,
+        seed=seed,
+        hand_classes=hand,
+        init=init,
+        epochs=epochs,
+        unused=unused,
+        progress=progress,
+    )
     typer.echo("test: " + ", ".join(f"{k} {v:.4f}" for k, v in report["test_metrics"].items()))
     typer.echo(f"model written to {out / MODEL_FILE}")
 
 
-CkptsArg = Annotated[list[Path], typer.Argument(
-    help="Checkpoints (.pt files) or classical models (model.npz from --arch bovw / vgg_svm).")]
+CkptsArg = Annotated[
+    list[Path],
+    typer.Argument(
+        help="Checkpoints (.pt files) or classical models (model.npz from --arch bovw / vgg_svm)."
+    ),
+]
 EvalDataOpt = _opt(Path, "Dataset folder or image folder (its test split is used).")
-ReportOpt = _opt(Path, "Markdown report to write (.md file; a .json beside it, and on a handskin "
-                 "dataset a PNG per network of where it fails: <stem>_errors_<model>.png).")
+ReportOpt = _opt(
+    Path,
+    "Markdown report to write (.md file; a .json beside it, and on a handskin "
+    "dataset a PNG per network of where it fails: <stem>_errors_<model>.png).",
+)
 ThreadsOpt = _opt(int, "CPU threads used for the timing (count).")
 EvalHandOpt = _opt(str | None, "Image folders: hand folder names (default: the checkpoint's).")
-EvalTtaOpt = _opt(bool, "Also score each network (.pt) with test-time flips, in a row of its "
-                  "own: the mean softmax over the views it was trained on (original, columns "
-                  "and rows reversed), about 3x the ms per image.", "--tta")
-EnsembleOpt = _opt(bool, "Also score the mean softmax of all the networks (.pt) given for each "
-                   "task with two or more, in a row of its own (and, with --tta, with flips); "
-                   "its ms per image is about the sum of its members'.", "--ensemble")
-Int8Opt = _opt(bool, "Also score each HandsNet (.pt) as an int8 network (oneDNN, activation "
-               "ranges from 512 training images of --data), in a row of its own; on AVX2 CPUs "
-               "about 1.5x faster per image than the float fast path.", "--int8")
-CompileOpt = _opt(bool, "Also time each network's float fast path compiled by TorchInductor "
-                  "(torch.compile, weights frozen; needs a C++ compiler): ms per image at batch "
-                  "1, shown in the tables when faster. Costs 5-20 s of compiling per row.",
-                  "--compile")  # fmt: skip
-TimeRunsOpt = _opt(int, "Timed batch-1 runs per inference path and round, after 10 warm-up runs "
-                   "(count); each path's time is the median of a round.")
-TimeRoundsOpt = _opt(int, "Rounds of timing in which a network's inference paths (eval mode, "
-                     "prepared, fast, compiled) take turns; the least median is kept (count).")
+EvalTtaOpt = _opt(
+    bool,
+    "Also score each network (.pt) with test-time flips, in a row of its "
+    "own: the mean softmax over the views it was trained on (original, columns "
+    "and rows reversed), about 3x the ms per image.",
+    "--tta",
+)
+EnsembleOpt = _opt(
+    bool,
+    "Also score the mean softmax of all the networks (.pt) given for each "
+    "task with two or more, in a row of its own (and, with --tta, with flips); "
+    "its ms per image is about the sum of its members'.",
+    "--ensemble",
+)
+Int8Opt = _opt(
+    bool,
+    "Also score each HandsNet (.pt) as an int8 network (oneDNN, activation "
+    "ranges from 512 training images of --data), in a row of its own; on AVX2 CPUs "
+    "about 1.5x faster per image than the float fast path.",
+    "--int8",
+)
+CompileOpt = _opt(
+    bool,
+    "Also time each network's float fast path compiled by TorchInductor "
+    "(torch.compile, weights frozen; needs a C++ compiler): ms per image at batch "
+    "1, shown in the tables when faster. Costs 5-20 s of compiling per row.",
+    "--compile",
+)
+TimeRunsOpt = _opt(
+    int,
+    "Timed batch-1 runs per inference path and round, after 10 warm-up runs "
+    "(count); each path's time is the median of a round.",
+)
+TimeRoundsOpt = _opt(
+    int,
+    "Rounds of timing in which a network's inference paths (eval mode, "
+    "prepared, fast, compiled) take turns; the least median is kept (count).",
+)
 
 
 def evaluate_command(
@@ -340,12 +485,29 @@ def evaluate_command(
         jobs = eval_jobs(checkpoints, tta, ensemble, int8)
         hand = _hand_classes(hand_classes)
         timing = {"threads": threads, "time_runs": time_runs}
-        rows = [evaluate_ensemble(c, data, hand_classes=hand, tta=t, compiled=compiled,
-                                  time_rounds=time_rounds, **timing)
-                if isinstance(c, list) else
-                evaluate_checkpoint(c, data, hand_classes=hand, tta=t, int8=q,
-                                    compiled=compiled, time_rounds=time_rounds, **timing)
-                for c, t, q in jobs]  # fmt: skip
+        rows = [
+            evaluate_ensemble(
+                c,
+                data,
+                hand_classes=hand,
+                tta=t,
+                compiled=compiled,
+                time_rounds=time_rounds,
+                **timing,
+            )
+            if isinstance(c, list)
+            else evaluate_checkpoint(
+                c,
+                data,
+                hand_classes=hand,
+                tta=t,
+                int8=q,
+                compiled=compiled,
+                time_rounds=time_rounds,
+                **timing,
+            )
+            for c, t, q in jobs
+        ]
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     from learn.leakage import leakage_note

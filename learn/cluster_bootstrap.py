@@ -28,8 +28,9 @@ STRATUM_SHIFT = 40
 STRATA = ("subjects", "object instances", "unattributed samples")
 
 
-def sample_groups(subject: np.ndarray | None, instance: np.ndarray | None,
-                n: int | None = None) -> np.ndarray:  # fmt: skip
+def sample_groups(
+    subject: np.ndarray | None, instance: np.ndarray | None, n: int | None = None
+) -> np.ndarray:
     """(S,) int64 group code of each test sample from its dataset ``subject_id`` and
     ``instance_id`` ((S,) ints, -1 where none; None when the data has no such field): its
     subject, else its object instance, else itself. ``n`` (S) when both are None."""
@@ -53,8 +54,9 @@ def group_counts(groups: np.ndarray) -> dict[str, int]:
     return {STRATA[s]: int(np.sum(strata == s)) for s in range(len(STRATA)) if np.any(strata == s)}
 
 
-def sample_weights(groups: np.ndarray, resamples: int = N_RESAMPLES,
-                   seed: int = BOOTSTRAP_SEED) -> np.ndarray:  # fmt: skip
+def sample_weights(
+    groups: np.ndarray, resamples: int = N_RESAMPLES, seed: int = BOOTSTRAP_SEED
+) -> np.ndarray:
     """(B, S) float64: how many times each of the S test samples is drawn in each of B
     resamples, when groups are drawn with replacement within their stratum."""
     codes, inverse = np.unique(np.asarray(groups, dtype=np.int64), return_inverse=True)
@@ -63,8 +65,9 @@ def sample_weights(groups: np.ndarray, resamples: int = N_RESAMPLES,
     counts = np.zeros((resamples, len(codes)))
     for stratum in np.unique(strata):
         cols = np.flatnonzero(strata == stratum)
-        counts[:, cols] = rng.multinomial(len(cols), np.full(len(cols), 1.0 / len(cols)),
-                                          size=resamples)  # fmt: skip
+        counts[:, cols] = rng.multinomial(
+            len(cols), np.full(len(cols), 1.0 / len(cols)), size=resamples
+        )
     return counts[:, inverse.ravel()]
 
 
@@ -73,18 +76,22 @@ def _ends(stats: np.ndarray, level: float) -> tuple[float, float]:
     return float(lo), float(hi)
 
 
-def grouped_accuracy_interval(correct: np.ndarray, groups: np.ndarray,
-                              level: float = LEVEL,
-                              resamples: int = N_RESAMPLES) -> tuple[float, float]:  # fmt: skip
+def grouped_accuracy_interval(
+    correct: np.ndarray, groups: np.ndarray, level: float = LEVEL, resamples: int = N_RESAMPLES
+) -> tuple[float, float]:
     """Percentile interval (lo, hi) of an accuracy, fractions, from (S,) per-sample right (1) or
     wrong (0), test subjects and instances redrawn (`sample_weights`)."""
     w = sample_weights(groups, resamples)
     return _ends(w @ np.asarray(correct, dtype=np.float64) / w.sum(1), level)
 
 
-def grouped_difference_interval(correct_a: np.ndarray, correct_b: np.ndarray, groups: np.ndarray,
-                                level: float = LEVEL,
-                                resamples: int = N_RESAMPLES) -> tuple[float, float]:  # fmt: skip
+def grouped_difference_interval(
+    correct_a: np.ndarray,
+    correct_b: np.ndarray,
+    groups: np.ndarray,
+    level: float = LEVEL,
+    resamples: int = N_RESAMPLES,
+) -> tuple[float, float]:
     """Percentile interval (lo, hi) of accuracy A minus accuracy B (fractions) on the same (S,)
     test samples, redrawn together by group: a paired comparison that allows for subjects."""
     diff = np.asarray(correct_a, dtype=np.float64) - np.asarray(correct_b, dtype=np.float64)
@@ -92,9 +99,13 @@ def grouped_difference_interval(correct_a: np.ndarray, correct_b: np.ndarray, gr
     return _ends(w @ diff / w.sum(1), level)
 
 
-def grouped_mean_iou_interval(cms: np.ndarray, groups: np.ndarray, level: float = LEVEL,
-                              resamples: int = N_RESAMPLES,
-                              seed: int = BOOTSTRAP_SEED) -> tuple[float, float]:  # fmt: skip
+def grouped_mean_iou_interval(
+    cms: np.ndarray,
+    groups: np.ndarray,
+    level: float = LEVEL,
+    resamples: int = N_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+) -> tuple[float, float]:
     """Percentile interval (lo, hi) of the pooled mIoU of (S, C, C) per-image confusion
     matrices (`learn.significance.per_image_confusion`), test subjects redrawn."""
     s, c = cms.shape[0], cms.shape[1]
@@ -102,16 +113,21 @@ def grouped_mean_iou_interval(cms: np.ndarray, groups: np.ndarray, level: float 
     return _ends(batched_mean_iou(pooled), level)
 
 
-def grouped_mean_iou_difference_interval(cms_a: np.ndarray, cms_b: np.ndarray,
-                                         groups: np.ndarray, level: float = LEVEL,
-                                         resamples: int = N_RESAMPLES,
-                                         ) -> tuple[float, float]:  # fmt: skip
+def grouped_mean_iou_difference_interval(
+    cms_a: np.ndarray,
+    cms_b: np.ndarray,
+    groups: np.ndarray,
+    level: float = LEVEL,
+    resamples: int = N_RESAMPLES,
+) -> tuple[float, float]:
     """Percentile interval (lo, hi) of mIoU A minus mIoU B (fractions) of two segmenters' (S, C,
     C) per-image confusion matrices on the same test images, redrawn together by group (pass
     ``sample_groups(None, None, n=S)`` to redraw single images): a paired comparison."""
     if cms_a.shape != cms_b.shape:
-        raise ValueError(f"grouped_mean_iou_difference_interval: {cms_a.shape} against "
-                         f"{cms_b.shape}; give both the same test images and classes")
+        raise ValueError(
+            f"grouped_mean_iou_difference_interval: {cms_a.shape} against "
+            f"{cms_b.shape}; give both the same test images and classes"
+        )
     s, c = cms_a.shape[0], cms_a.shape[1]
     w = sample_weights(groups, resamples)
     a = batched_mean_iou((w @ cms_a.reshape(s, -1)).reshape(-1, c, c))

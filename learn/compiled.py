@@ -55,7 +55,8 @@ def compile_for_cpu(net: nn.Module, example: torch.Tensor) -> nn.Module:
         raise CompileUnavailable(
             f"torch.compile could not compile {type(net).__name__} ({type(err).__name__}: "
             f"{first}); time the network without --compile, or install a C++ compiler (g++) "
-            f"if that is what is missing") from err  # fmt: skip
+            f"if that is what is missing"
+        ) from err
     return compiled
 
 
@@ -64,8 +65,9 @@ def compiled_agreement(compiled: nn.Module, net: nn.Module, check: torch.Tensor)
     was compiled at batch 1) on which ``compiled``'s argmax (per image, or per pixel for
     segmenters) equals ``net``'s."""
     with torch.inference_mode(), flushing():
-        same = [(compiled(x[None]).argmax(1) == net(x[None]).argmax(1)).double().mean()
-                for x in check]  # fmt: skip
+        same = [
+            (compiled(x[None]).argmax(1) == net(x[None]).argmax(1)).double().mean() for x in check
+        ]
     return float(torch.stack(same).mean())
 
 
@@ -81,9 +83,13 @@ def compile_at(net: nn.Module, input_size: tuple[int, int], threads: int = 1) ->
         torch.set_num_threads(before)
 
 
-def compiled_ms_per_image(net: nn.Module, input_size: tuple[int, int], threads: int = 1,
-                          n_runs: int = 100, check: torch.Tensor | None = None,
-                          ) -> tuple[float, float | None]:  # fmt: skip
+def compiled_ms_per_image(
+    net: nn.Module,
+    input_size: tuple[int, int],
+    threads: int = 1,
+    n_runs: int = 100,
+    check: torch.Tensor | None = None,
+) -> tuple[float, float | None]:
     """Median CPU ms per image at batch 1 after warm-up of ``net`` compiled by
     ``compile_for_cpu`` with ``threads`` torch threads (``input_size``: (H, W) px), and the
     fraction of ``check`` images (``(N, C, H, W)``, run one at a time) on which the compiled
@@ -92,8 +98,9 @@ def compiled_ms_per_image(net: nn.Module, input_size: tuple[int, int], threads: 
     compiled = compile_at(net, input_size, threads)
     try:
         (ms,) = interleaved_cpu_ms([compiled], input_size, threads, n_runs, rounds=1, n_warmup=20)
-        agree = None if check is None or not len(check) else compiled_agreement(compiled, net,
-                                                                                 check)  # fmt: skip
+        agree = (
+            None if check is None or not len(check) else compiled_agreement(compiled, net, check)
+        )
         return ms, agree
     finally:
         torch.compiler.reset()

@@ -49,15 +49,21 @@ class ModelConfig:
         _require(self.in_channels >= 1, "ModelConfig.in_channels must be >= 1")
         _require(self.width is None or self.width > 0, "ModelConfig.width must be > 0")
         _require(min(self.input_size) >= 1, "ModelConfig.input_size must be positive pixels")
-        _require(0 <= self.dropout_scale < 1 / 0.6,
-                 f"ModelConfig.dropout_scale = {self.dropout_scale}: HandsNet's rates (up to "
-                 "60 %) times it must stay in [0, 1). Fix: 1 (the paper's) or e.g. 0 (none)")
-        _require(self.dropout_scale == 1 or self.arch == "handsnet",
-                 f"ModelConfig.dropout_scale applies to HandsNet, not {self.arch!r}. Fix: "
-                 "leave it out (1)")
-        _require(self.canvas_mm is None or min(self.canvas_mm) > 0,
-                 f"ModelConfig.canvas_mm = {self.canvas_mm}: give (H, W) > 0 mm, e.g. "
-                 "[229, 383] (the forearm map), or leave it out to stretch each map")
+        _require(
+            0 <= self.dropout_scale < 1 / 0.6,
+            f"ModelConfig.dropout_scale = {self.dropout_scale}: HandsNet's rates (up to "
+            "60 %) times it must stay in [0, 1). Fix: 1 (the paper's) or e.g. 0 (none)",
+        )
+        _require(
+            self.dropout_scale == 1 or self.arch == "handsnet",
+            f"ModelConfig.dropout_scale applies to HandsNet, not {self.arch!r}. Fix: "
+            "leave it out (1)",
+        )
+        _require(
+            self.canvas_mm is None or min(self.canvas_mm) > 0,
+            f"ModelConfig.canvas_mm = {self.canvas_mm}: give (H, W) > 0 mm, e.g. "
+            "[229, 383] (the forearm map), or leave it out to stretch each map",
+        )
 
     def kwargs(self) -> dict[str, object]:
         """Keyword arguments of ``create_model(self.arch, **kwargs)``."""
@@ -108,15 +114,25 @@ class TrainConfig:
     label_smoothing: float = 0.0
 
     def __post_init__(self) -> None:
-        _require(self.optimizer in OPTIMIZERS, f"TrainConfig.optimizer {self.optimizer!r}: "
-                 f"choose one of {', '.join(OPTIMIZERS)}")
-        _require(0 <= self.ema_decay < 1, f"TrainConfig.ema_decay must be in [0, 1), not "
-                 f"{self.ema_decay}. Fix: 0 (off) or e.g. 0.998 (an average of ~500 steps)")
-        _require(0 <= self.label_smoothing < 1, f"TrainConfig.label_smoothing must be in [0, 1), "
-                 f"not {self.label_smoothing}. Fix: 0 (off) or e.g. 0.1")
-        _require(not (self.label_smoothing and self.loss in ("dice", "generalized_dice")),
-                 f"TrainConfig.label_smoothing applies to cross-entropy, not loss "
-                 f"{self.loss!r}. Fix: label_smoothing = 0, or loss ce / weighted_ce / ce_dice")
+        _require(
+            self.optimizer in OPTIMIZERS,
+            f"TrainConfig.optimizer {self.optimizer!r}: choose one of {', '.join(OPTIMIZERS)}",
+        )
+        _require(
+            0 <= self.ema_decay < 1,
+            f"TrainConfig.ema_decay must be in [0, 1), not "
+            f"{self.ema_decay}. Fix: 0 (off) or e.g. 0.998 (an average of ~500 steps)",
+        )
+        _require(
+            0 <= self.label_smoothing < 1,
+            f"TrainConfig.label_smoothing must be in [0, 1), "
+            f"not {self.label_smoothing}. Fix: 0 (off) or e.g. 0.1",
+        )
+        _require(
+            not (self.label_smoothing and self.loss in ("dice", "generalized_dice")),
+            f"TrainConfig.label_smoothing applies to cross-entropy, not loss "
+            f"{self.loss!r}. Fix: label_smoothing = 0, or loss ce / weighted_ce / ce_dice",
+        )
         _require(self.lr > 0 and self.weight_decay >= 0, "TrainConfig: lr > 0, weight_decay >= 0")
         _require(0 < self.lr_drop_factor <= 1, "TrainConfig.lr_drop_factor must be in (0, 1]")
         _require(self.lr_drop_period_epochs >= 1, "TrainConfig.lr_drop_period_epochs >= 1")
@@ -156,8 +172,14 @@ VGG16_FINETUNE = ExperimentConfig(ModelConfig("vgg16", 2, width=0.25), TrainConf
 #: paper), ~1,000 training samples x 3 views for the paper-sized set: ~20 s per epoch on 2 cores.
 SEGNET = ExperimentConfig(
     ModelConfig("segnet", 7, width=0.25),
-    TrainConfig(optimizer="adam", lr=0.001, lr_drop_period_epochs=20, batch_size=16, epochs=30,
-                loss="weighted_ce"),
+    TrainConfig(
+        optimizer="adam",
+        lr=0.001,
+        lr_drop_period_epochs=20,
+        batch_size=16,
+        epochs=30,
+        loss="weighted_ce",
+    ),
 )
 
 #: SegNet at full width for a GPU (*ours*): sgdm lr 0.01, 60 epochs, x 0.2 every 30.
@@ -174,8 +196,14 @@ SEGNET_GPU = ExperimentConfig(
 #: mIoU points over its first 6 epochs on 5.2x the hands (51.5 % against 61.2 % at epoch 6).
 FCN16S = ExperimentConfig(
     ModelConfig("fcn16s", 7, width=0.25),
-    TrainConfig(optimizer="adam", lr=0.001, lr_drop_period_epochs=20, batch_size=16, epochs=30,
-                loss="weighted_ce"),
+    TrainConfig(
+        optimizer="adam",
+        lr=0.001,
+        lr_drop_period_epochs=20,
+        batch_size=16,
+        epochs=30,
+        loss="weighted_ce",
+    ),
 )
 
 #: the preset of each network (``handskin train --arch``'s default configuration)

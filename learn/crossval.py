@@ -87,18 +87,37 @@ class CVResult:
     best_changes: dict
 
 
-def cross_validate(run: RunConfig, path: str | Path, grid: Mapping[str, Sequence[object]], *,
-                   k: int = 5, hand_classes: Sequence[str] | None = None) -> CVResult:  # fmt: skip
+def cross_validate(
+    run: RunConfig,
+    path: str | Path,
+    grid: Mapping[str, Sequence[object]],
+    *,
+    k: int = 5,
+    hand_classes: Sequence[str] | None = None,
+) -> CVResult:
     """k-fold CV of every grid point on the train split of ``path`` (dataset or image folder)."""
     runs = grid_runs(run, grid)
-    ds = open_split(Path(path), "train", run.task, run.model.input_size, hand_classes,
-                    run.train.seed, run.model.canvas_mm)  # fmt: skip
+    ds = open_split(
+        Path(path),
+        "train",
+        run.task,
+        run.model.input_size,
+        hand_classes,
+        run.train.seed,
+        run.model.canvas_mm,
+    )
     full = materialize(ds, "train")
     rows = []
     for changes, cfg in runs:
         scores = [_fold_score(cfg, full, tr, va) for tr, va in folds(ds, k, run.train.seed)]
-        rows.append({"changes": changes, "fold_metrics": scores,
-                     "mean": float(np.mean(scores)), "std": float(np.std(scores))})  # fmt: skip
+        rows.append(
+            {
+                "changes": changes,
+                "fold_metrics": scores,
+                "mean": float(np.mean(scores)),
+                "std": float(np.std(scores)),
+            }
+        )
     best = int(np.argmax([r["mean"] for r in rows]))
     return CVResult(rows, runs[best][1], runs[best][0])
 

@@ -9,8 +9,12 @@ from pathlib import Path
 from matplotlib.figure import Figure
 
 
-def history_figure(history: list[dict], title: str = "", metric: str = "validation metric",
-                   best_epoch: int | None = None) -> Figure:  # fmt: skip
+def history_figure(
+    history: list[dict],
+    title: str = "",
+    metric: str = "validation metric",
+    best_epoch: int | None = None,
+) -> Figure:
     """Loss curves (train, val) and the validation metric per epoch; ``best_epoch`` (1-based,
     the epoch ``best.pt`` holds) is marked on the metric's curve."""
     fig = Figure(figsize=(9, 3.5), layout="constrained")
@@ -23,8 +27,14 @@ def history_figure(history: list[dict], title: str = "", metric: str = "validati
         ax_metric.plot(epochs, values, "s-", c="C1")
         if best_epoch in epochs:
             value = values[epochs.index(best_epoch)]
-            ax_metric.plot([best_epoch], [value], "*", c="C3", ms=14,
-                           label=f"best.pt (epoch {best_epoch}, {value:.4f})")
+            ax_metric.plot(
+                [best_epoch],
+                [value],
+                "*",
+                c="C3",
+                ms=14,
+                label=f"best.pt (epoch {best_epoch}, {value:.4f})",
+            )
             ax_metric.legend(loc="lower right")
     ax_loss.set(xlabel="epoch", ylabel="loss", title="loss")
     ax_loss.legend()
@@ -33,9 +43,13 @@ def history_figure(history: list[dict], title: str = "", metric: str = "validati
     return fig
 
 
-def plot_history(history: list[dict], path: str | Path, title: str = "",
-                 metric: str = "validation metric",
-                 best_epoch: int | None = None) -> Path:  # fmt: skip
+def plot_history(
+    history: list[dict],
+    path: str | Path,
+    title: str = "",
+    metric: str = "validation metric",
+    best_epoch: int | None = None,
+) -> Path:
     """:func:`history_figure` saved as a PNG at ``path``."""
     history_figure(history, title, metric, best_epoch).savefig(path, dpi=100)
     return Path(path)

@@ -23,8 +23,10 @@ def check_device(device: str) -> None:
     """Raise ConfigError when ``device`` (``RunConfig.device``, ``--device``) is no training
     device's name, or names a GPU this torch cannot reach."""
     if not re.fullmatch(DEVICE_PATTERN, device):
-        raise ConfigError(f"device {device!r} is not a training device. Fix: cpu (the default), "
-                          "cuda or cuda:N (a GPU)")  # fmt: skip
+        raise ConfigError(
+            f"device {device!r} is not a training device. Fix: cpu (the default), "
+            "cuda or cuda:N (a GPU)"
+        )
     if device == "cpu":
         return
     if not torch.cuda.is_available():
@@ -35,5 +37,6 @@ def check_device(device: str) -> None:
     index = torch.device(device).index or 0
     if index >= torch.cuda.device_count():
         n = torch.cuda.device_count()
-        raise ConfigError(f"device {device!r}: this machine has {n} GPU(s). Fix: give cuda:0 "
-                          f"to cuda:{n - 1}")  # fmt: skip
+        raise ConfigError(
+            f"device {device!r}: this machine has {n} GPU(s). Fix: give cuda:0 to cuda:{n - 1}"
+        )

@@ -71,18 +71,28 @@ def check_teacher(run, data_path: str | Path | None) -> dict:
 
     path = Path(run.distill_from)
     if not path.is_file():
-        raise DataError(f"distill_from: no teacher checkpoint at {path}. Fix: give a best.pt of "
-                        "handskin train (e.g. --arch vgg16), or distill_from = \"\" (off)")
+        raise DataError(
+            f"distill_from: no teacher checkpoint at {path}. Fix: give a best.pt of "
+            'handskin train (e.g. --arch vgg16), or distill_from = "" (off)'
+        )
     ckpt = load_checkpoint(path)
     theirs = run_from_dict(ckpt["config"])
     mine = run.model
-    wrong = [f"{name} {a} (the student's: {b})" for name, a, b in (
-        ("task", theirs.task, run.task), ("num_classes", theirs.model.num_classes,
-        mine.num_classes), ("input_size", tuple(theirs.model.input_size), tuple(mine.input_size)),
-        ("canvas_mm", theirs.model.canvas_mm, mine.canvas_mm)) if a != b]  # fmt: skip
+    wrong = [
+        f"{name} {a} (the student's: {b})"
+        for name, a, b in (
+            ("task", theirs.task, run.task),
+            ("num_classes", theirs.model.num_classes, mine.num_classes),
+            ("input_size", tuple(theirs.model.input_size), tuple(mine.input_size)),
+            ("canvas_mm", theirs.model.canvas_mm, mine.canvas_mm),
+        )
+        if a != b
+    ]
     if wrong:
-        raise ConfigError(f"distill_from {path}: the teacher's {'; '.join(wrong)} differ. Fix: "
-                          "a teacher trained for the same task, classes, input_size and canvas")
+        raise ConfigError(
+            f"distill_from {path}: the teacher's {'; '.join(wrong)} differ. Fix: "
+            "a teacher trained for the same task, classes, input_size and canvas"
+        )
     trained_on = (ckpt.get("data") or {}).get("path")
     learned = [r["path"] for r in lineage(ckpt)]  # its data and its own starts' and teachers'
     if data_path is not None and learned:
@@ -102,14 +112,22 @@ def check_teacher(run, data_path: str | Path | None) -> dict:
                 f"{theirs.train.seed}, val_fraction {theirs.val_fraction}) is not the student's, "
                 "so it trained on some of the student's validation people and the best epoch "
                 "is picked on people the teacher knows. Give the student the teacher's seed to "
-                "avoid it", stacklevel=2)  # fmt: skip
+                "avoid it",
+                stacklevel=2,
+            )
     return ckpt
 
 
 @torch.no_grad()
-def teacher_probs(teacher: nn.Module, x: torch.Tensor, views: torch.Tensor, temperature: float,
-                  batch_size: int = 256, device: str = "cpu",
-                  progress: bool = False) -> torch.Tensor:  # fmt: skip
+def teacher_probs(
+    teacher: nn.Module,
+    x: torch.Tensor,
+    views: torch.Tensor,
+    temperature: float,
+    batch_size: int = 256,
+    device: str = "cpu",
+    progress: bool = False,
+) -> torch.Tensor:
     """(S, C) float32: the mean over ``views`` (ids of `learn.tta.VIEW_DIMS`) of
     ``softmax(teacher(view of x) / temperature)`` for images ``x`` (S, 1, h, w)."""
     teacher = teacher.eval().to(device)
@@ -117,14 +135,22 @@ def teacher_probs(teacher: nn.Module, x: torch.Tensor, views: torch.Tensor, temp
     bar = tqdm(range(0, len(x), batch_size), desc="teacher", leave=False, disable=not progress)
     for start in bar:
         batch = x[start : start + batch_size].to(device)
-        views_p = [(teacher(flip_view(batch, int(v)).contiguous(memory_format=torch.channels_last))
-                    .float() / temperature).softmax(1) for v in views]  # fmt: skip
+        views_p = [
+            (
+                teacher(
+                    flip_view(batch, int(v)).contiguous(memory_format=torch.channels_last)
+                ).float()
+                / temperature
+            ).softmax(1)
+            for v in views
+        ]
         out.append(torch.stack(views_p).mean(0).cpu())
     return torch.cat(out)
 
 
-def make_distiller(run, data, progress: bool = True,
-                   checked: dict | None = None) -> Distiller | None:  # fmt: skip
+def make_distiller(
+    run, data, progress: bool = True, checked: dict | None = None
+) -> Distiller | None:
     """The run's :class:`Distiller` over ``data.train`` (a ``learn.folder.Data``), or None when
     ``run.distill_from`` is empty. The teacher runs in float32 on ``run.device``. ``checked``:
     the dict :func:`check_teacher` already returned for this run and data (not loaded again)."""
@@ -135,9 +161,18 @@ def make_distiller(run, data, progress: bool = True,
     ckpt = checked if checked is not None else check_teacher(run, data.description.get("path"))
     teacher, _ = model_from_checkpoint(ckpt)
     teacher = teacher.to(memory_format=torch.channels_last)
-    probs = teacher_probs(teacher, data.train.x, views_of(run), run.distill_temperature,
-                          run.eval_batch_size, run.device, progress)  # fmt: skip
+    probs = teacher_probs(
+        teacher,
+        data.train.x,
+        views_of(run),
+        run.distill_temperature,
+        run.eval_batch_size,
+        run.device,
+        progress,
+    )
     if not torch.isfinite(probs).all():
-        raise DataError(f"distill_from {run.distill_from}: the teacher's probabilities are not "
-                        "finite. Fix: a teacher checkpoint that evaluates (handskin evaluate)")
+        raise DataError(
+            f"distill_from {run.distill_from}: the teacher's probabilities are not "
+            "finite. Fix: a teacher checkpoint that evaluates (handskin evaluate)"
+        )
     return Distiller(probs.to(run.device), run.distill_weight, run.distill_temperature)

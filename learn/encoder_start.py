@@ -37,16 +37,40 @@ def encoder_run(run):
     number format and device; 20 epochs with lr x 0.2 after 14."""
     from learn.experiments.models import preset_run
 
-    vgg = preset_run("vgg16", device=run.device, seed=run.train.seed, epochs=CLASSIFIER_EPOCHS,
-                     lr_drop_period_epochs=CLASSIFIER_DROP_EPOCHS)  # fmt: skip
-    model = dataclasses.replace(vgg.model, width=run.model.width, input_size=run.model.input_size,
-                                in_channels=run.model.in_channels, canvas_mm=run.model.canvas_mm)
-    return dataclasses.replace(vgg, model=model, val_fraction=run.val_fraction, flips=run.flips,
-                               rot180=run.rot180, threads=run.threads, precision=run.precision)
+    vgg = preset_run(
+        "vgg16",
+        device=run.device,
+        seed=run.train.seed,
+        epochs=CLASSIFIER_EPOCHS,
+        lr_drop_period_epochs=CLASSIFIER_DROP_EPOCHS,
+    )
+    model = dataclasses.replace(
+        vgg.model,
+        width=run.model.width,
+        input_size=run.model.input_size,
+        in_channels=run.model.in_channels,
+        canvas_mm=run.model.canvas_mm,
+    )
+    return dataclasses.replace(
+        vgg,
+        model=model,
+        val_fraction=run.val_fraction,
+        flips=run.flips,
+        rot180=run.rot180,
+        threads=run.threads,
+        precision=run.precision,
+    )
 
 
-def wanted(flag: bool | None, run, data: str | Path, init: Path | None, cv_grid: str | None,
-           out: Path, resume: bool) -> bool:  # fmt: skip
+def wanted(
+    flag: bool | None,
+    run,
+    data: str | Path,
+    init: Path | None,
+    cv_grid: str | None,
+    out: Path,
+    resume: bool,
+) -> bool:
     """Whether ``handskin train`` starts ``run`` from a classifier's encoder: ``flag``
     (``--pretrain-encoder`` / ``--no-pretrain-encoder``) when given; by default yes for a
     segmenter on a handskin dataset without ``--init`` or ``--cv-grid``, and when resuming, as
@@ -56,13 +80,16 @@ def wanted(flag: bool | None, run, data: str | Path, init: Path | None, cv_grid:
 
     if flag is False:
         return False
-    if flag is None and (run.task != "segment" or init is not None or cv_grid
-                         or not is_dataset(data)):  # fmt: skip
+    if flag is None and (
+        run.task != "segment" or init is not None or cv_grid or not is_dataset(data)
+    ):
         return False
     started = _started(out, resume)  # reads out/last.pt once, when resuming
     if flag and started is False:
-        raise ConfigError(f"--resume: the run in {out} did not start from {out / FOLDER}'s "
-                          "encoder. Fix: resume it with --no-pretrain-encoder")
+        raise ConfigError(
+            f"--resume: the run in {out} did not start from {out / FOLDER}'s "
+            "encoder. Fix: resume it with --no-pretrain-encoder"
+        )
     return bool(flag) or started in (None, True)
 
 
@@ -82,19 +109,26 @@ def check_pretrain(run, data: str | Path, init: Path | None, cv_grid: str | None
     from learn.folder import is_dataset
 
     if run.task != "segment":
-        raise ConfigError(f"--pretrain-encoder starts a segmenter (segnet, fcn16s), not a "
-                          f"{run.model.arch}. Fix: remove it, or --arch segnet")
+        raise ConfigError(
+            f"--pretrain-encoder starts a segmenter (segnet, fcn16s), not a "
+            f"{run.model.arch}. Fix: remove it, or --arch segnet"
+        )
     if init is not None:
-        raise ConfigError("--pretrain-encoder trains the start that --init would give. Fix: "
-                          "give one of the two")
+        raise ConfigError(
+            "--pretrain-encoder trains the start that --init would give. Fix: give one of the two"
+        )
     if not is_dataset(data):
-        raise ConfigError(f"--pretrain-encoder needs a handskin dataset (hands and non-hands for "
-                          f"the classifier); {data} is an image folder. Fix: train a vgg16 on "
-                          "a classification folder and give its best.pt as --init")
+        raise ConfigError(
+            f"--pretrain-encoder needs a handskin dataset (hands and non-hands for "
+            f"the classifier); {data} is an image folder. Fix: train a vgg16 on "
+            "a classification folder and give its best.pt as --init"
+        )
     if cv_grid:
-        raise ConfigError("--pretrain-encoder with --cv-grid: the classifier trained on every "
-                          "fold's validation people, so the folds would not be held out. Fix: "
-                          "cross-validate from scratch, then train the pick with the encoder")
+        raise ConfigError(
+            "--pretrain-encoder with --cv-grid: the classifier trained on every "
+            "fold's validation people, so the folds would not be held out. Fix: "
+            "cross-validate from scratch, then train the pick with the encoder"
+        )
 
 
 def pretrain_encoder(run, data: str | Path, out: Path, progress: bool = True) -> Path:
@@ -104,5 +138,6 @@ def pretrain_encoder(run, data: str | Path, out: Path, progress: bool = True) ->
     from learn.train import load_data
 
     vgg = encoder_run(run)
-    return train_once(Path(out) / FOLDER, vgg, lambda: load_data(data, vgg, progress=progress),
-                      progress=progress)[0]  # fmt: skip
+    return train_once(
+        Path(out) / FOLDER, vgg, lambda: load_data(data, vgg, progress=progress), progress=progress
+    )[0]

@@ -72,12 +72,16 @@ def check_members(members: Sequence[Member]) -> None:
     """ConfigError naming the first member that differs from the first in anything of
     `SHARED`, and the fix; also for fewer than two members or one file given twice."""
     if len(members) < 2:
-        raise ConfigError(f"an ensemble needs two or more checkpoints; got {len(members)}. "
-                          "Fix: give two or more .pt files of one task")  # fmt: skip
+        raise ConfigError(
+            f"an ensemble needs two or more checkpoints; got {len(members)}. "
+            "Fix: give two or more .pt files of one task"
+        )
     seen = [m.path.resolve() for m in members]
     if len(set(seen)) < len(seen):
-        raise ConfigError("an ensemble lists one checkpoint twice, which weights it double. "
-                          "Fix: give each .pt file once")  # fmt: skip
+        raise ConfigError(
+            "an ensemble lists one checkpoint twice, which weights it double. "
+            "Fix: give each .pt file once"
+        )
     first = members[0]
     for what, get in SHARED:
         for m in members[1:]:
@@ -85,7 +89,8 @@ def check_members(members: Sequence[Member]) -> None:
                 raise ConfigError(
                     f"ensemble members differ in {what}: {first.path} has {get(first)!r}, "
                     f"{m.path} has {get(m)!r}. Fix: average only networks trained for the same "
-                    "task, classes, input size and canvas")  # fmt: skip
+                    "task, classes, input size and canvas"
+                )
 
 
 def load_members(paths: Sequence[str | Path], int8_ok: bool = False) -> list[Member]:

@@ -48,14 +48,21 @@ def _classifier_sheet(r: dict, label: str, data: str | Path, path: Path) -> None
     errors = r["errors"][:N_ERROR_TILES]
     with DatasetReader(data) as reader:
         images = np.stack([reader.image[e["index"]] for e in errors])
-    titles = [f"#{e['index']} {e['true']} as {e['predicted']} {_confidence(e)}\n"
-              f"{str(e.get('contactor', '')).split(': ')[-1]}, "
-              f"{e.get('active taxels', '?')} taxels"
-              + (f", {e['hand parts']}" if e.get("hand parts") else "")
-              for e in errors]  # fmt: skip
-    save_contact_sheet(path, images, titles=titles, n_cols=6,
-                       title=f"{label}: its {len(errors)} most confident errors of "
-                             f"{len(r['errors'])} (test split)")  # fmt: skip
+    titles = [
+        f"#{e['index']} {e['true']} as {e['predicted']} {_confidence(e)}\n"
+        f"{str(e.get('contactor', '')).split(': ')[-1]}, "
+        f"{e.get('active taxels', '?')} taxels"
+        + (f", {e['hand parts']}" if e.get("hand parts") else "")
+        for e in errors
+    ]
+    save_contact_sheet(
+        path,
+        images,
+        titles=titles,
+        n_cols=6,
+        title=f"{label}: its {len(errors)} most confident errors of "
+        f"{len(r['errors'])} (test split)",
+    )
 
 
 def _confidence(error: dict) -> str:
@@ -78,20 +85,24 @@ def _segmenter_sheet(r: dict, label: str, data: str | Path, path: Path) -> None:
     with DatasetReader(data) as reader:
         image = np.stack([reader.image[w["index"]] for w in worst]) / 255.0
         canvas = input_canvas(r.get("canvas_mm"), reader.map.step_mm)
-        truth = net_labels(np.stack([reader.label_image[w["index"]] for w in worst]), size,
-                           canvas)  # fmt: skip
+        truth = net_labels(np.stack([reader.label_image[w["index"]] for w in worst]), size, canvas)
     x = np.round(255 * net_input(image, size, "segment", canvas)).astype(np.uint8)
     titles = []
     for w in worst:
-        titles += [f"#{w['index']} truth\n{w.get('action', '')}, "
-                   f"{w.get('hand parts touching', '?')} parts",
-                   f"predicted: mIoU {100 * w['mean_iou']:.0f} %\n"
-                   f"pixel accuracy {100 * w['pixel_accuracy']:.0f} %"]  # fmt: skip
-    save_contact_sheet(path, np.repeat(x, 2, axis=0),
-                       labels=np.stack([truth, pred], axis=1).reshape(-1, *size),
-                       titles=titles, n_cols=6,
-                       title=f"{label}: its {len(worst)} test images with the lowest mIoU "
-                             f"(truth, prediction)")  # fmt: skip
+        titles += [
+            f"#{w['index']} truth\n{w.get('action', '')}, "
+            f"{w.get('hand parts touching', '?')} parts",
+            f"predicted: mIoU {100 * w['mean_iou']:.0f} %\n"
+            f"pixel accuracy {100 * w['pixel_accuracy']:.0f} %",
+        ]
+    save_contact_sheet(
+        path,
+        np.repeat(x, 2, axis=0),
+        labels=np.stack([truth, pred], axis=1).reshape(-1, *size),
+        titles=titles,
+        n_cols=6,
+        title=f"{label}: its {len(worst)} test images with the lowest mIoU (truth, prediction)",
+    )
 
 
 def error_text(r: dict) -> list[str]:
@@ -100,15 +111,25 @@ def error_text(r: dict) -> list[str]:
         return []
     if r.get("errors"):
         shown = min(N_ERROR_TILES, len(r["errors"]))
-        sure = ("SVM margin" if "margin" in r["errors"][0]
-                else "probability given to the wrong class")
-        return [f"Its {shown} most confident errors of {len(r['errors'])} (sample index, truth, "
-                f"{sure}, contactor, active taxels, hand parts pressing):", "",
-                f"![most confident errors]({r['error_sheet']})", ""]  # fmt: skip
+        sure = (
+            "SVM margin" if "margin" in r["errors"][0] else "probability given to the wrong class"
+        )
+        return [
+            f"Its {shown} most confident errors of {len(r['errors'])} (sample index, truth, "
+            f"{sure}, contactor, active taxels, hand parts pressing):",
+            "",
+            f"![most confident errors]({r['error_sheet']})",
+            "",
+        ]
     worst = r["worst"]["images"]
     shown = r["worst"]["maps"]["shape"][0]
     listed = ", ".join(f"#{w['index']} ({100 * w['mean_iou']:.0f} %)" for w in worst[:20])
-    return [f"Its {shown} test images with the lowest mIoU of {r['n_test']}, each scored on its "
-            "own (sample index, action, hand parts touching; truth left, prediction right):", "",
-            f"![lowest-mIoU test images]({r['error_sheet']})", "",
-            f"The {min(20, len(worst))} lowest (sample index, mIoU): {listed}.", ""]  # fmt: skip
+    return [
+        f"Its {shown} test images with the lowest mIoU of {r['n_test']}, each scored on its "
+        "own (sample index, action, hand parts touching; truth left, prediction right):",
+        "",
+        f"![lowest-mIoU test images]({r['error_sheet']})",
+        "",
+        f"The {min(20, len(worst))} lowest (sample index, mIoU): {listed}.",
+        "",
+    ]

@@ -15,8 +15,9 @@ from tactile.errors import ConfigError
 Job = tuple[Path | list[Path], bool, bool]
 
 
-def eval_jobs(checkpoints: list[Path], tta: bool = False, ensemble: bool = False,
-              int8: bool = False) -> list[Job]:  # fmt: skip
+def eval_jobs(
+    checkpoints: list[Path], tta: bool = False, ensemble: bool = False, int8: bool = False
+) -> list[Job]:
     """The report's rows, in order, as (checkpoint, or an ensemble's list of them; with
     test-time flips; as int8). ConfigError / DataError naming the fix on a file that does not
     load, a network trained without flips under ``tta``, or nothing to ensemble or quantize."""
@@ -49,27 +50,35 @@ def int8_jobs(ckpts: dict[Path, dict]) -> list[tuple[Path, bool, bool]]:
     checkpoint dict); a ConfigError if none is."""
     from learn.int8_file import is_int8
 
-    nets = [c for c, k in ckpts.items()
-            if k["config"]["model"]["arch"] == "handsnet" and not is_int8(k)]  # fmt: skip
+    nets = [
+        c for c, k in ckpts.items() if k["config"]["model"]["arch"] == "handsnet" and not is_int8(k)
+    ]
     if not nets:
         saved = any(is_int8(k) for k in ckpts.values())
-        raise ConfigError("--int8 scores HandsNet as an int8 network; no float HandsNet "
-                          "checkpoint was given" + (" (int8 files of handskin quantize are "
-                          "scored as int8 without it)" if saved else "") + ". Fix: add a "
-                          "HandsNet .pt file, or drop --int8")  # fmt: skip
+        raise ConfigError(
+            "--int8 scores HandsNet as an int8 network; no float HandsNet "
+            "checkpoint was given"
+            + (" (int8 files of handskin quantize are scored as int8 without it)" if saved else "")
+            + ". Fix: add a "
+            "HandsNet .pt file, or drop --int8"
+        )
     return [(c, False, True) for c in nets]
 
 
-def ensemble_jobs(by_task: dict[str, list[Path]], tta: bool,
-                   ) -> list[tuple[list[Path], bool, bool]]:  # fmt: skip
+def ensemble_jobs(
+    by_task: dict[str, list[Path]],
+    tta: bool,
+) -> list[tuple[list[Path], bool, bool]]:
     """``--ensemble``'s jobs: each task's networks together, checked alike before any work."""
     from learn.ensemble import load_members
 
     groups = [paths for paths in by_task.values() if len(paths) >= 2]
     if not groups:
         counts = ", ".join(f"{len(p)} {t}" for t, p in by_task.items()) or "no networks"
-        raise ConfigError(f"--ensemble averages two or more networks of one task; got {counts}. "
-                          "Fix: give two or more classifier or segmenter .pt files")
+        raise ConfigError(
+            f"--ensemble averages two or more networks of one task; got {counts}. "
+            "Fix: give two or more classifier or segmenter .pt files"
+        )
     for paths in groups:
         load_members(paths)
     return [(paths, t, False) for paths in groups for t in ((False, True) if tta else (False,))]

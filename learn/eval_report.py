@@ -27,8 +27,10 @@ def confusion_markdown(cm: torch.Tensor, names: tuple[str, ...]) -> str:
     """A markdown table of a confusion matrix as % of each true class (rows true)."""
     pct = M.percent_by_true_class(cm).numpy()
     head = "| true \\ predicted | " + " | ".join(names) + " |"
-    rows = [f"| {n} | " + " | ".join(_pct(v) for v in row) + " |"
-            for n, row in zip(names, pct, strict=True)]
+    rows = [
+        f"| {n} | " + " | ".join(_pct(v) for v in row) + " |"
+        for n, row in zip(names, pct, strict=True)
+    ]
     return "\n".join([head, "|" + "---|" * (len(names) + 1), *rows])
 
 
@@ -47,8 +49,11 @@ def trained_on(r: dict) -> str:
     leak = shared.get("test_samples")
     if not leak:
         return data_name(r)
-    what = [name for name, key in (("subjects", "subjects"), ("object instances", "instances"))
-            if shared.get(key)]
+    what = [
+        name
+        for name, key in (("subjects", "subjects"), ("object instances", "instances"))
+        if shared.get(key)
+    ]
     return data_name(r) + f"; not held out: {leak} test samples share its {' or '.join(what)}"
 
 
@@ -57,14 +62,21 @@ def _init_text(r: dict) -> str:
     if r.get("timing") or r.get("members"):  # classical, or an ensemble (members listed)
         return ""
     init = r.get("init")
-    text = (" Initialisation: not recorded (a checkpoint from before it was)." if init is None
-            else " Initialisation: random (seeded)." if init == "random"
-            else f" Initialisation: the weights of `{init}`.")  # fmt: skip
+    text = (
+        " Initialisation: not recorded (a checkpoint from before it was)."
+        if init is None
+        else " Initialisation: random (seeded)."
+        if init == "random"
+        else f" Initialisation: the weights of `{init}`."
+    )
     bf16 = trained_precision(r) == "bf16"
     cfg = r.get("config") or {}
-    teacher = (f" Distilled from `{cfg['distill_from']}` (share {cfg.get('distill_weight'):g} of "
-               f"the loss, temperature {cfg.get('distill_temperature'):g})."
-               if cfg.get("distill_from") else "")  # fmt: skip
+    teacher = (
+        f" Distilled from `{cfg['distill_from']}` (share {cfg.get('distill_weight'):g} of "
+        f"the loss, temperature {cfg.get('distill_temperature'):g})."
+        if cfg.get("distill_from")
+        else ""
+    )
     return text + (" Trained in bfloat16 (autocast forward pass)." if bf16 else "") + teacher
 
 
@@ -100,9 +112,12 @@ def _not_scored(title: str, kind: str, table: dict, columns: tuple[str, ...]) ->
     """The section of a task no row of the report has: one sentence with the paper's known
     values (% but for ms/image) instead of a table of empty rows."""
     cell = lambda c, v: f"{_fmt(v)} ms per image" if c == "ms/image" else f"{c} {_fmt(v)} %"  # noqa: E731
-    known = [f"{name} " + ", ".join(cell(c, v) for c, v in zip(columns, vals, strict=True)
-                                    if v is not None)
-             for name, vals in table.items() if any(v is not None for v in vals)]  # fmt: skip
+    known = [
+        f"{name} "
+        + ", ".join(cell(c, v) for c, v in zip(columns, vals, strict=True) if v is not None)
+        for name, vals in table.items()
+        if any(v is not None for v in vals)
+    ]
     paper = f" The paper's values: {'; '.join(known)}." if known else ""
     return [f"## {title}", "", f"No {kind} was scored in this report.{paper}"]
 
@@ -110,11 +125,19 @@ def _not_scored(title: str, kind: str, table: dict, columns: tuple[str, ...]) ->
 def _table3(rows: list[dict]) -> list[str]:
     ours = _ours(rows, "classify")
     if not ours:
-        return _not_scored("Hand / non-hand classification (paper: Table 3)", "classifier",
-                           PAPER_TABLE3, ("accuracy", "ms/image"))  # fmt: skip
-    out = ["## Hand / non-hand classification (paper: Table 3)", "",
-           "| method | accuracy % (ours) | CPU ms/image (ours, batch 1) | accuracy % (paper) "
-           "| ms/image (paper) | trained on |", "|---|---|---|---|---|---|"]  # fmt: skip
+        return _not_scored(
+            "Hand / non-hand classification (paper: Table 3)",
+            "classifier",
+            PAPER_TABLE3,
+            ("accuracy", "ms/image"),
+        )
+    out = [
+        "## Hand / non-hand classification (paper: Table 3)",
+        "",
+        "| method | accuracy % (ours) | CPU ms/image (ours, batch 1) | accuracy % (paper) "
+        "| ms/image (paper) | trained on |",
+        "|---|---|---|---|---|---|",
+    ]
     for name in _names(PAPER_TABLE3, ours):
         if _shown_longer(name, ours):
             continue
@@ -129,18 +152,29 @@ def _table3(rows: list[dict]) -> list[str]:
 def _table8(rows: list[dict]) -> list[str]:
     ours = _ours(rows, "segment")
     if not ours:
-        return _not_scored("Hand-part segmentation (paper: Table 8)", "segmenter", PAPER_TABLE8,
-                           ("Acc", "mAcc", "mIoU", "fwIoU", "ms/image"))  # fmt: skip
-    out = ["## Hand-part segmentation (paper: Table 8)", "",
-           "| method | Acc % | mAcc % | mIoU % | fwIoU % | CPU ms/image (batch 1) "
-           "| paper Acc % | paper mAcc % | paper mIoU % | paper fwIoU % | paper ms/image "
-           "| trained on |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        return _not_scored(
+            "Hand-part segmentation (paper: Table 8)",
+            "segmenter",
+            PAPER_TABLE8,
+            ("Acc", "mAcc", "mIoU", "fwIoU", "ms/image"),
+        )
+    out = [
+        "## Hand-part segmentation (paper: Table 8)",
+        "",
+        "| method | Acc % | mAcc % | mIoU % | fwIoU % | CPU ms/image (batch 1) "
+        "| paper Acc % | paper mAcc % | paper mIoU % | paper fwIoU % | paper ms/image "
+        "| trained on |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for name in _names(PAPER_TABLE8, ours):
         if _shown_longer(name, ours):
             continue
         r, paper = ours.get(name), _paper_row(name, PAPER_TABLE8, 5)
-        mine = ["not run"] * 5 if r is None else [
-            *(_fmt(r["metrics"][k], 100) for k in SEG_KEYS), _best_ms(r)]
+        mine = (
+            ["not run"] * 5
+            if r is None
+            else [*(_fmt(r["metrics"][k], 100) for k in SEG_KEYS), _best_ms(r)]
+        )
         where = "" if r is None else trained_on(r)
         out.append(f"| {name} | " + " | ".join([*mine, *map(_fmt, paper), where]) + " |")
     return out
@@ -152,23 +186,32 @@ def _table8_hand_pixels(rows: list[dict]) -> list[str]:
     ours = {n: r for n, r in _ours(rows, "segment").items() if len(r["cm"]) == 7}
     if not ours:
         return []
-    out = ["### The same predictions on the hand's pixels", "",
-           "Scored on the pixels the truth labels as one of the six hand parts only (the "
-           "background's pixels left out, a hand pixel predicted as background counted wrong): "
-           "the scores of a labelling that marks the hand and leaves the rest unlabelled.", ""]
+    out = [
+        "### The same predictions on the hand's pixels",
+        "",
+        "Scored on the pixels the truth labels as one of the six hand parts only (the "
+        "background's pixels left out, a hand pixel predicted as background counted wrong): "
+        "the scores of a labelling that marks the hand and leaves the rest unlabelled.",
+        "",
+    ]
     hand_cms = {n: M.without_true_class(r["cm"]) for n, r in ours.items()}
-    shares = {round(float(hand_cms[n].sum() / max(int(torch.tensor(r["cm"]).sum()), 1)), 6)
-              for n, r in ours.items()}  # fmt: skip
+    shares = {
+        round(float(hand_cms[n].sum() / max(int(torch.tensor(r["cm"]).sum()), 1)), 6)
+        for n, r in ours.items()
+    }
     if len(shares) == 1:
         hand = shares.pop()
         wrong = 1 - paper.SEGNET_ACC_PCT / 100
-        out += [f"The hand's pixels are {_fmt(hand, 100)} % of the test images' pixels. A "
-                f"whole-image Acc of {_fmt(paper.SEGNET_ACC_PCT)} % (the paper's SegNet) would "
-                f"leave {_fmt(wrong, 100)} % of the pixels wrong, "
-                f"{_fmt(wrong / hand if hand else float('nan'), 100)} % of the hand's pixel "
-                f"count, beside an mIoU of {_fmt(paper.SEGNET_MIOU_PCT)} %: on prints like "
-                "these the paper's Acc reads more like a score on the hand's pixels (or a "
-                "mean class accuracy) than a whole-image one.", ""]
+        out += [
+            f"The hand's pixels are {_fmt(hand, 100)} % of the test images' pixels. A "
+            f"whole-image Acc of {_fmt(paper.SEGNET_ACC_PCT)} % (the paper's SegNet) would "
+            f"leave {_fmt(wrong, 100)} % of the pixels wrong, "
+            f"{_fmt(wrong / hand if hand else float('nan'), 100)} % of the hand's pixel "
+            f"count, beside an mIoU of {_fmt(paper.SEGNET_MIOU_PCT)} %: on prints like "
+            "these the paper's Acc reads more like a score on the hand's pixels (or a "
+            "mean class accuracy) than a whole-image one.",
+            "",
+        ]
     out += ["| method | Acc % | mAcc % | mIoU % | fwIoU % |", "|---|---|---|---|---|"]
     for name, cm in hand_cms.items():
         s = M.segmentation_scores(cm)
@@ -185,8 +228,11 @@ def _best_ms(r: dict) -> str:
     """A row's table ms/image: the fast path's, or the compiled network's (marked) when it was
     timed, is faster and agreed with the fast path on its check images."""
     ms, agree = r["ms_per_image"], r.get("compiled_agreement")
-    if ms.get("compiled") is not None and ms["compiled"] < ms["fast"] and (
-            agree is None or agree >= COMPILED_AGREEMENT):  # fmt: skip
+    if (
+        ms.get("compiled") is not None
+        and ms["compiled"] < ms["fast"]
+        and (agree is None or agree >= COMPILED_AGREEMENT)
+    ):
         return f"{_fmt(ms['compiled'])} (compiled)"
     return _fmt(ms["fast"])
 
@@ -207,15 +253,22 @@ def _timing(r: dict) -> str:
     if r.get("timing"):  # a classical model: one path, image to label
         return head + f"{_fmt(ms['fast'])} ({r['timing']})"
     if q := r.get("int8"):  # one path: the int8 network
-        saved = (f" of {Path(q['calibration_data']).name}, saved by handskin quantize"
-                 if q.get("saved") else "")  # fmt: skip
-        return head + (f"{_fmt(ms['fast'])}, int8 ({q['backend']}; activation ranges from "
-                       f"{q['calibration_images']} images of the {q['calibration_split']} "
-                       f"split{saved})")
+        saved = (
+            f" of {Path(q['calibration_data']).name}, saved by handskin quantize"
+            if q.get("saved")
+            else ""
+        )
+        return head + (
+            f"{_fmt(ms['fast'])}, int8 ({q['backend']}; activation ranges from "
+            f"{q['calibration_images']} images of the {q['calibration_split']} "
+            f"split{saved})"
+        )
     gpu = "none (no CUDA)" if ms["gpu"] is None else _fmt(ms["gpu"])
-    return (head + f"eval mode {_fmt(ms['eval_mode'])}, prepared (BN folded) "
-            f"{_fmt(ms['prepared'])}, fast path {_fmt(ms['fast'])} "
-            f"(bf16 {'on' if r['bf16'] else 'off'}){_compiled_text(r)}; GPU {gpu}")  # fmt: skip
+    return (
+        head + f"eval mode {_fmt(ms['eval_mode'])}, prepared (BN folded) "
+        f"{_fmt(ms['prepared'])}, fast path {_fmt(ms['fast'])} "
+        f"(bf16 {'on' if r['bf16'] else 'off'}){_compiled_text(r)}; GPU {gpu}"
+    )
 
 
 def _canvas_text(r: dict) -> str:
@@ -228,31 +281,47 @@ def _details(r: dict, label: str) -> list[str]:
     epoch = "" if r["epoch"] is None else f"epoch {r['epoch']}, "
     seed = "" if r.get("members") else f"seed {r['seed']}, "
     size = r.get("input_size") or r["config"]["model"]["input_size"]
-    return [f"### {label} — `{r['checkpoint']}` "
-            f"({epoch}{seed}{r['n_test']} test images)", "",
-            f"Trained on: {trained_on(r)}.{_init_text(r)}", "", *_members_text(r),
-            *([note, ""] if (note := leakage_note(r.get("shared_with_training"))) else []),
-            f"{_timing(r)}; input (h, w) = {tuple(size)} px{_canvas_text(r)}.", "",
-            *_tta_text(r),
-            "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
-            "", "Confusion matrix, % of each true class:", "",
-            confusion_markdown(torch.tensor(r["cm"]), names), "",
-            *_by_size(r), *error_text(r), *_merged(r), *_seg_groups(r)]  # fmt: skip
+    return [
+        f"### {label} — `{r['checkpoint']}` ({epoch}{seed}{r['n_test']} test images)",
+        "",
+        f"Trained on: {trained_on(r)}.{_init_text(r)}",
+        "",
+        *_members_text(r),
+        *([note, ""] if (note := leakage_note(r.get("shared_with_training"))) else []),
+        f"{_timing(r)}; input (h, w) = {tuple(size)} px{_canvas_text(r)}.",
+        "",
+        *_tta_text(r),
+        "Scores (%): " + ", ".join(f"{k} {_fmt(v, 100)}" for k, v in r["metrics"].items()),
+        "",
+        "Confusion matrix, % of each true class:",
+        "",
+        confusion_markdown(torch.tensor(r["cm"]), names),
+        "",
+        *_by_size(r),
+        *error_text(r),
+        *_merged(r),
+        *_seg_groups(r),
+    ]
 
 
 def _members_text(r: dict) -> list[str]:
     """An ensemble row's list of networks; its scores and times are of their mean softmax."""
     if not r.get("members"):
         return []
-    lines = ["Ensemble: scores and times are of the mean softmax of these networks "
-             "(`learn.ensemble.MeanSoftmax`), each run on the same input:", ""]  # fmt: skip
+    lines = [
+        "Ensemble: scores and times are of the mean softmax of these networks "
+        "(`learn.ensemble.MeanSoftmax`), each run on the same input:",
+        "",
+    ]
     for m in r["members"]:
         width = "" if m.get("width") is None else f", w{m['width']:g}"
-        lines.append(f"- `{m['checkpoint']}`: {ARCH_LABEL.get(m['arch'], m['arch'])}{width}, "
-                     f"epoch {m['epoch']}, seed {m['seed']}, trained on "
-                     f"{data_name({'train_data': m['train_data']})}"
-                     + ("" if not m.get("tta_views") else f", flips over views {m['tta_views']}")
-                     + ".")  # fmt: skip
+        lines.append(
+            f"- `{m['checkpoint']}`: {ARCH_LABEL.get(m['arch'], m['arch'])}{width}, "
+            f"epoch {m['epoch']}, seed {m['seed']}, trained on "
+            f"{data_name({'train_data': m['train_data']})}"
+            + ("" if not m.get("tta_views") else f", flips over views {m['tta_views']}")
+            + "."
+        )
     return [*lines, ""]
 
 
@@ -261,11 +330,17 @@ def _tta_text(r: dict) -> list[str]:
     views = r.get("tta_views")
     if not views:
         return []
-    batch = ("each network runs its views as one batch" if r.get("members")
-             else f"run as one batch of {len(views)} images")  # fmt: skip
-    return [f"Test-time flips: scores and times are of the mean softmax over views {views} "
-            "(`learn.tta.VIEW_DIMS`: 0 original, 1 columns reversed, 2 rows reversed, 3 both), "
-            f"{batch}.", ""]  # fmt: skip
+    batch = (
+        "each network runs its views as one batch"
+        if r.get("members")
+        else f"run as one batch of {len(views)} images"
+    )
+    return [
+        f"Test-time flips: scores and times are of the mean softmax over views {views} "
+        "(`learn.tta.VIEW_DIMS`: 0 original, 1 columns reversed, 2 rows reversed, 3 both), "
+        f"{batch}.",
+        "",
+    ]
 
 
 #: Class groups of the 7-class hand-part segmentation the report also scores, (title, groups).
@@ -283,9 +358,13 @@ def _merged(r: dict) -> list[str]:
         return []
     names = tuple(r["class_names"]) or tuple(str(i) for i in range(7))
     ious = M.class_ious(torch.tensor(r["cm"]))
-    lines = ["IoU per class (%): " + ", ".join(
-        f"{n} {_fmt(float(v), 100)}" for n, v in zip(names, ious, strict=True)), "",
-        "mIoU (%) of coarser groupings of the same predictions:", ""]  # fmt: skip
+    lines = [
+        "IoU per class (%): "
+        + ", ".join(f"{n} {_fmt(float(v), 100)}" for n, v in zip(names, ious, strict=True)),
+        "",
+        "mIoU (%) of coarser groupings of the same predictions:",
+        "",
+    ]
     for title, groups in MERGED_VIEWS:
         lines.append(f"- {title}: {_fmt(M.mean_iou(M.merge_classes(r['cm'], groups)), 100)}")
     return [*lines, ""]
@@ -298,8 +377,11 @@ def _seg_groups(r: dict) -> list[str]:
     groups = r.get("segmentation_by_group")
     if not groups:
         return []
-    out = ["Scores by group of test images (each group's pooled confusion matrix; contactor and "
-           "action lowest mIoU first):", ""]  # fmt: skip
+    out = [
+        "Scores by group of test images (each group's pooled confusion matrix; contactor and "
+        "action lowest mIoU first):",
+        "",
+    ]
     for title, rows in groups.items():
         out += [*segmentation_group_markdown(rows, title), ""]
     return out
@@ -311,20 +393,43 @@ def _by_size(r: dict) -> list[str]:
 
     if not r.get("by_active_taxels"):
         return []
-    out = ["Accuracy by contact size (active taxels: pressure above the dataset's active "
-           "threshold):", "", *breakdown_markdown(r["by_active_taxels"]), ""]
+    out = [
+        "Accuracy by contact size (active taxels: pressure above the dataset's active threshold):",
+        "",
+        *breakdown_markdown(r["by_active_taxels"]),
+        "",
+    ]
     if r.get("by_force"):
-        out += ["Accuracy by press force (the dataset's `force_n`: total normal force at the "
-                "sampled frame):", "", *breakdown_markdown(r["by_force"], "press force", "N"), ""]
+        out += [
+            "Accuracy by press force (the dataset's `force_n`: total normal force at the "
+            "sampled frame):",
+            "",
+            *breakdown_markdown(r["by_force"], "press force", "N"),
+            "",
+        ]
     if r.get("by_contactor"):
-        out += ["Accuracy by contactor (the dataset's `contactor` kind and type), least accurate "
-                "first:", "", *group_markdown(r["by_contactor"]), ""]
+        out += [
+            "Accuracy by contactor (the dataset's `contactor` kind and type), least accurate "
+            "first:",
+            "",
+            *group_markdown(r["by_contactor"]),
+            "",
+        ]
     if r.get("hands_by_parts"):
-        out += ["Accuracy on the hand samples by the hand parts that press (the labels of their "
-                "active taxels):", "", *group_markdown(r["hands_by_parts"], "hand parts"), ""]
+        out += [
+            "Accuracy on the hand samples by the hand parts that press (the labels of their "
+            "active taxels):",
+            "",
+            *group_markdown(r["hands_by_parts"], "hand parts"),
+            "",
+        ]
     if r.get("hands_by_action"):
-        out += ["Accuracy on the hand samples by action, least accurate first:", "",
-                *group_markdown(r["hands_by_action"], "action"), ""]
+        out += [
+            "Accuracy on the hand samples by action, least accurate first:",
+            "",
+            *group_markdown(r["hands_by_action"], "action"),
+            "",
+        ]
     return out
 
 
@@ -334,8 +439,10 @@ def _significance(rows: list[dict]) -> list[str]:
 
     labels = row_labels(rows)
     clf = [(r, lab) for r, lab in zip(rows, labels, strict=True) if r["task"] == "classify"]
-    return [*significance_markdown([r for r, _ in clf], [lab for _, lab in clf]),
-            *segmentation_markdown(rows, labels)]  # fmt: skip
+    return [
+        *significance_markdown([r for r, _ in clf], [lab for _, lab in clf]),
+        *segmentation_markdown(rows, labels),
+    ]
 
 
 #: An innermost JSON list of numbers, as ``json.dumps(..., indent=1)`` spreads it over lines.
@@ -345,8 +452,10 @@ _NUMBER_LIST = re.compile(r"\[(\s*-?[\d.eE+-]+(?:,\s*-?[\d.eE+-]+)*\s*)\]")
 def report_json(rows: list[dict]) -> str:
     """The report rows as indented JSON with each innermost list of numbers on one line (a
     segmenter's per-image confusion matrices take ~30 % of the space they would one per line)."""
-    return _NUMBER_LIST.sub(lambda m: "[" + ", ".join(v.strip() for v in m.group(1).split(","))
-                            + "]", json.dumps(rows, indent=1))  # fmt: skip
+    return _NUMBER_LIST.sub(
+        lambda m: "[" + ", ".join(v.strip() for v in m.group(1).split(",")) + "]",
+        json.dumps(rows, indent=1),
+    )
 
 
 def _timing_rule(rows: list[dict]) -> str:
@@ -358,22 +467,40 @@ def _timing_rule(rows: list[dict]) -> str:
     runs = " or ".join(f"{n}" for n in sorted({n for n, _ in specs}))
     rounds = " or ".join(f"{k}" for k in sorted({k for _, k in specs}))
     one_path = any(r.get("arch") in CLASSICAL and r.get("time_rounds") for r in rows)
-    return (f"each inference path's median of {runs} runs after 10 warm-up runs, the least over "
-            f"{rounds} rounds in which a network's paths (eval mode, prepared, fast, compiled) "
-            f"take turns, so that a slow spell of the machine weighs on all of them alike"
-            + ("; a classical model (BoVW, VGG16 + SVM) has one path, timed in rounds that "
-               "follow each other" if one_path else ""))
+    return (
+        f"each inference path's median of {runs} runs after 10 warm-up runs, the least over "
+        f"{rounds} rounds in which a network's paths (eval mode, prepared, fast, compiled) "
+        f"take turns, so that a slow spell of the machine weighs on all of them alike"
+        + (
+            "; a classical model (BoVW, VGG16 + SVM) has one path, timed in rounds that "
+            "follow each other"
+            if one_path
+            else ""
+        )
+    )
 
 
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:
     """The markdown report: our rows next to the paper's Tables 3 and 8 ("paper" columns;
     "unknown" where we do not know the paper's value), then per-model details."""
-    lines = ["# handskin evaluation", "", header, "",
-             "Columns marked *paper* are Albini & Cannata (IJRR 2020); ours are on the test split "
-             f"named above. Timing: {_timing_rule(rows)}.", "",
-             *_table3(rows), "", *_table8(rows), "", *_table8_hand_pixels(rows), "",
-             *_significance(rows), "## Details",
-             ""]  # fmt: skip
+    lines = [
+        "# handskin evaluation",
+        "",
+        header,
+        "",
+        "Columns marked *paper* are Albini & Cannata (IJRR 2020); ours are on the test split "
+        f"named above. Timing: {_timing_rule(rows)}.",
+        "",
+        *_table3(rows),
+        "",
+        *_table8(rows),
+        "",
+        *_table8_hand_pixels(rows),
+        "",
+        *_significance(rows),
+        "## Details",
+        "",
+    ]
     for r, label in zip(rows, row_labels(rows), strict=True):
         lines += _details(r, label)
     Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")

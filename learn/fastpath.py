@@ -73,8 +73,13 @@ def clear_disagreements(a: nn.Module, b: nn.Module, x: torch.Tensor, tie_gap: fl
         return int(((a(x).argmax(1) != p.argmax(1)) & clear).sum())
 
 
-def fast_inference(model: nn.Module, *, bf16: bool | None = None, check: torch.Tensor | None = None,
-                   tie_gap: float = BF16_TIE_GAP) -> nn.Module:  # fmt: skip
+def fast_inference(
+    model: nn.Module,
+    *,
+    bf16: bool | None = None,
+    check: torch.Tensor | None = None,
+    tie_gap: float = BF16_TIE_GAP,
+) -> nn.Module:
     """The default CPU inference path: ``prepare_for_inference`` + channels-last input + bf16.
 
     bf16 (default: classifiers on CPUs with native bf16) is kept only if it changes no decision
@@ -97,8 +102,9 @@ def fast_inference(model: nn.Module, *, bf16: bool | None = None, check: torch.T
     return fast if clear_disagreements(fast, float_path, check, tie_gap) == 0 else float_path
 
 
-def cpu_ms_per_image(model: nn.Module, input_size: tuple[int, int], threads: int = 1,
-                     n_runs: int = 100) -> float:  # fmt: skip
+def cpu_ms_per_image(
+    model: nn.Module, input_size: tuple[int, int], threads: int = 1, n_runs: int = 100
+) -> float:
     """Median CPU ms per image at batch 1 after warm-up, with ``threads`` torch threads."""
     before = torch.get_num_threads()
     torch.set_num_threads(threads)
@@ -110,16 +116,26 @@ def cpu_ms_per_image(model: nn.Module, input_size: tuple[int, int], threads: int
 
 def check_timing(time_runs: int, time_rounds: int, threads: int) -> None:
     """A ``ConfigError`` naming the option unless runs, rounds and threads are each >= 1."""
-    for name, value in (("time runs", time_runs), ("time rounds", time_rounds),
-                        ("threads", threads)):  # fmt: skip
+    for name, value in (
+        ("time runs", time_runs),
+        ("time rounds", time_rounds),
+        ("threads", threads),
+    ):
         if not isinstance(value, int) or value < 1:
-            raise ConfigError(f"{name} must be a whole number >= 1, got {value!r}; fix the "
-                              f"timing options: pass --{name.replace(' ', '-')} 1 or more")
+            raise ConfigError(
+                f"{name} must be a whole number >= 1, got {value!r}; fix the "
+                f"timing options: pass --{name.replace(' ', '-')} 1 or more"
+            )
 
 
-def interleaved_cpu_ms(nets: list[nn.Module | None], input_size: tuple[int, int],
-                       threads: int = 1, n_runs: int = 100, rounds: int = 3,
-                       n_warmup: int = 10) -> list[float | None]:  # fmt: skip
+def interleaved_cpu_ms(
+    nets: list[nn.Module | None],
+    input_size: tuple[int, int],
+    threads: int = 1,
+    n_runs: int = 100,
+    rounds: int = 3,
+    n_warmup: int = 10,
+) -> list[float | None]:
     """CPU ms per image at batch 1 of each network (None for None): the least, over ``rounds``
     rounds, of the median of ``n_runs`` runs after ``n_warmup`` warm-up runs, the networks taking
     turns within each round. ``threads`` torch threads (restored afterwards); ``input_size``:

@@ -38,7 +38,8 @@ class LoadReport:
         fresh = sorted({k.split(".")[0] for k in self.missing + self.shape_mismatch})
         n = len(self.loaded) + len(self.missing) + len(self.shape_mismatch)
         return f"{len(self.loaded)} of {n} tensors loaded" + (
-            f"; {', '.join(fresh)} start fresh" if fresh else "")
+            f"; {', '.join(fresh)} start fresh" if fresh else ""
+        )
 
 
 def read_state_dict(source: str | Path | Mapping) -> dict[str, torch.Tensor]:
@@ -154,9 +155,7 @@ def setup_finetuning(
     return optimizer, make_scheduler(optimizer, cfg), report
 
 
-def check_init(
-    run, init: str | Path, data_path: str | Path | None
-) -> tuple[LoadReport, dict]:
+def check_init(run, init: str | Path, data_path: str | Path | None) -> tuple[LoadReport, dict]:
     """What ``--init`` ``init`` (a .pt checkpoint) loads into ``run``'s network (a ``RunConfig``),
     checked before any data are read, and the loaded checkpoint (for `learn.train.fit`'s
     ``init_checkpoint``, so it is read once). ConfigError naming the fix when none of its tensors
@@ -178,7 +177,8 @@ def check_init(
             f"of width {run.model.width} and {run.model.num_classes} classes (it holds a "
             f"{theirs.get('arch', 'unknown')} of width {theirs.get('width')}). Fix: a checkpoint "
             "of the same network and width, or a vgg16 classifier of the same width for "
-            "segnet / fcn16s (its encoder loads)")
+            "segnet / fcn16s (its encoder loads)"
+        )
     paths = [r["path"] for r in lineage(ckpt)]
     shared = None
     if paths and data_path is not None:  # a segmenter is scored on the test hands only
@@ -191,5 +191,7 @@ def check_init(
             f"with {shared['test_samples']} of the {shared['n_test']} test samples of "
             f"{data_path}: the new model's test scores will not be held out (handskin evaluate "
             "flags them). Fix: start from a model trained on another subject pool, or generate "
-            "the datasets with --split keyed and one seed", stacklevel=2)  # fmt: skip
+            "the datasets with --split keyed and one seed",
+            stacklevel=2,
+        )
     return report, ckpt

@@ -52,8 +52,10 @@ def read_label_png(path: Path) -> np.ndarray:
     else:
         match = np.all(arr[:, :, None, :] == PALETTE[None, None], axis=-1)
         if not match.any(-1).all():
-            raise DataError(f"{path}: colours outside tactile.PALETTE. Fix: colour the labels "
-                            "with tactile.colorize or save class ids as a grey PNG")  # fmt: skip
+            raise DataError(
+                f"{path}: colours outside tactile.PALETTE. Fix: colour the labels "
+                "with tactile.colorize or save class ids as a grey PNG"
+            )
         ids = match.argmax(-1)
     if ids.max(initial=0) >= len(CLASS_NAMES):
         raise DataError(f"{path}: class ids must lie in 0..{len(CLASS_NAMES) - 1}")
@@ -64,8 +66,10 @@ def list_images(root: Path) -> tuple[list[Path], list[str]]:
     """Image files under ``root`` (class sub-folders, or flat) and their folder names."""
     files = sorted(p for p in root.rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
     if not files:
-        raise DataError(f"no images ({', '.join(IMAGE_SUFFIXES)}) under {root}. Fix: give a "
-                        "folder with class sub-folders of images")  # fmt: skip
+        raise DataError(
+            f"no images ({', '.join(IMAGE_SUFFIXES)}) under {root}. Fix: give a "
+            "folder with class sub-folders of images"
+        )
     return files, [p.parent.name if p.parent != root else "" for p in files]
 
 
@@ -79,10 +83,17 @@ class FolderDataset(Dataset):
     image, stratified by class, ``test_fraction`` of each class to test, seeded by ``seed``.
     """
 
-    def __init__(self, root: str | Path, split: str | None = "train", task: str = "classify",
-                 size: tuple[int, int] = (68, 100), flips: bool = True,
-                 hand_classes: Sequence[str] | None = None, test_fraction: float = 0.3,
-                 seed: int = 0) -> None:  # fmt: skip
+    def __init__(
+        self,
+        root: str | Path,
+        split: str | None = "train",
+        task: str = "classify",
+        size: tuple[int, int] = (68, 100),
+        flips: bool = True,
+        hand_classes: Sequence[str] | None = None,
+        test_fraction: float = 0.3,
+        seed: int = 0,
+    ) -> None:
         root = Path(root)
         if not root.is_dir():
             raise DataError(f"no image folder at {root}. Fix: give an existing folder")
@@ -121,8 +132,9 @@ def _classes(folders: list[str], hand_classes: Sequence[str] | None, root: Path)
         return tuple(known), np.array([known.index(f) for f in folders], np.int64)
     unknown = sorted(set(hand_classes) - set(known))
     if unknown:
-        raise DataError(f"hand classes {unknown} are not folders of {root}; "
-                        f"folders: {', '.join(known)}")  # fmt: skip
+        raise DataError(
+            f"hand classes {unknown} are not folders of {root}; folders: {', '.join(known)}"
+        )
     return HAND_NAMES, np.array([f in hand_classes for f in folders], np.int64)
 
 
@@ -177,21 +189,30 @@ def class_weights(y: torch.Tensor, num_classes: int) -> np.ndarray:
     return median_frequency_weights(counts, np.full(num_classes, counts.sum()))
 
 
-def open_split(path: Path, split: str, task: str, size, hand_classes, seed: int,
-               canvas_mm: tuple[float, float] | None = None) -> Dataset:  # fmt: skip
+def open_split(
+    path: Path,
+    split: str,
+    task: str,
+    size,
+    hand_classes,
+    seed: int,
+    canvas_mm: tuple[float, float] | None = None,
+) -> Dataset:
     """An un-flipped torch dataset of ``split`` from a handskin dataset or an image folder;
     ``canvas_mm`` (``ModelConfig.canvas_mm``) needs a dataset, whose map grid is in mm."""
     from learn.data import TorchTactileDataset
 
     if is_dataset(path):
-        return TorchTactileDataset(path, split=split, task=task, size=size, flips=False,
-                                   canvas_mm=canvas_mm)  # fmt: skip
+        return TorchTactileDataset(
+            path, split=split, task=task, size=size, flips=False, canvas_mm=canvas_mm
+        )
     if canvas_mm is not None:
         raise ConfigError(
             f"{path} is an image folder, whose pixels have no known size in mm, and the model "
             f"centres its inputs on a {canvas_mm} mm canvas (model.canvas_mm). Fix: ingest the "
             "recordings as a dataset (handskin ingest, with the part's layout), or use a model "
-            "without canvas_mm")
+            "without canvas_mm"
+        )
     return FolderDataset(path, split, task, size, False, hand_classes, seed=seed)
 
 
@@ -207,8 +228,10 @@ def group_ids(ds: Dataset) -> tuple[np.ndarray | None, np.ndarray | None, np.nda
         return ds.targets[ds.indices], None, None
     reader: DatasetReader = ds.reader
     idx = np.sort(ds.indices)
-    got = [reader[f][idx] if f in reader.fields else None
-           for f in ("is_hand", "subject_id", "instance_id")]  # fmt: skip
+    got = [
+        reader[f][idx] if f in reader.fields else None
+        for f in ("is_hand", "subject_id", "instance_id")
+    ]
     order = np.argsort(np.argsort(ds.indices))
     return tuple(None if g is None else g[order] for g in got)
 
@@ -236,25 +259,44 @@ def validation_split(ds: Dataset, fraction: float, seed: int) -> tuple[Dataset, 
     cls, subject, instance = group_ids(ds)
     if cls is not None:
         cls = (np.asarray(cls) > 0).astype(np.int64) if cls.max(initial=0) <= 1 else None
-    split = split_indices(cls, subject, instance, train_fraction=1.0 - fraction, seed=seed,
-                          method=split_method(ds), stream=1)  # fmt: skip
+    split = split_indices(
+        cls,
+        subject,
+        instance,
+        train_fraction=1.0 - fraction,
+        seed=seed,
+        method=split_method(ds),
+        stream=1,
+    )
     return subset(ds, split.train), subset(ds, split.test)
 
 
-def load_data(path: str | Path, run, *, hand_classes: Sequence[str] | None = None,
-              with_test: bool = True, progress: bool = True) -> Data:  # fmt: skip
+def load_data(
+    path: str | Path,
+    run,
+    *,
+    hand_classes: Sequence[str] | None = None,
+    with_test: bool = True,
+    progress: bool = True,
+) -> Data:
     """Train (minus a subject-disjoint validation part), validation and test tensors of ``path``
     for ``run`` (a ``learn.train.RunConfig``: task, input size, val_fraction, seed)."""
     path, seed, size = Path(path), run.train.seed, run.model.input_size
     canvas = run.model.canvas_mm
     train_ds = open_split(path, "train", run.task, size, hand_classes, seed, canvas)
     train_ds, val_ds = validation_split(train_ds, run.val_fraction, seed)
-    test_ds = (open_split(path, "test", run.task, size, hand_classes, seed, canvas)
-               if with_test else None)  # fmt: skip
+    test_ds = (
+        open_split(path, "test", run.task, size, hand_classes, seed, canvas) if with_test else None
+    )
     names = _class_names(train_ds, run.task)
-    desc = {"path": str(path), "kind": "dataset" if is_dataset(path) else "folder",
-            "hand_classes": None if hand_classes is None else list(hand_classes),
-            "n_train": len(train_ds), "n_val": _len(val_ds), "n_test": _len(test_ds)}  # fmt: skip
+    desc = {
+        "path": str(path),
+        "kind": "dataset" if is_dataset(path) else "folder",
+        "hand_classes": None if hand_classes is None else list(hand_classes),
+        "n_train": len(train_ds),
+        "n_val": _len(val_ds),
+        "n_test": _len(test_ds),
+    }
     val = None if val_ds is None else materialize(val_ds, "val", progress)
     test = None if test_ds is None else materialize(test_ds, "test", progress)
     train = materialize(train_ds, "train", progress)
@@ -269,8 +311,10 @@ def _types(path: Path, ds: Dataset, y: torch.Tensor) -> tuple[torch.Tensor, tupl
     from learn.aux_types import type_targets
 
     if not is_dataset(path):
-        raise ConfigError(f"{path} is an image folder, which records no contactor types. Fix: "
-                          "aux_types_weight = 0, or train on a handskin dataset")  # fmt: skip
+        raise ConfigError(
+            f"{path} is an image folder, which records no contactor types. Fix: "
+            "aux_types_weight = 0, or train on a handskin dataset"
+        )
     ids, names = type_targets(path, np.asarray(ds.indices), y.numpy() == 1)
     return torch.from_numpy(ids), names
 

@@ -13,8 +13,9 @@ from tactile.resize import canvas_px, fit_canvas, resize_image, resize_labels
 INPUTS = "segment-on-label-support"
 
 
-def net_input(image01: np.ndarray, size: tuple[int, int], task: str,
-              canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
+def net_input(
+    image01: np.ndarray, size: tuple[int, int], task: str, canvas: tuple[int, int] | None = None
+) -> np.ndarray:
     """Network input of image(s) (H, W) or (B, H, W) float scaled to [0, 1]: the anti-aliased
     resize to ``size`` (h, w) px; for ``task == "segment"`` kept on the support its nearest-
     neighbour labels have (`tactile.resize.resize_image` ``keep_support``), so that zero input
@@ -26,8 +27,9 @@ def net_input(image01: np.ndarray, size: tuple[int, int], task: str,
     return resize_image(image01, size, keep_support=task == "segment")
 
 
-def net_labels(labels: np.ndarray, size: tuple[int, int],
-               canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
+def net_labels(
+    labels: np.ndarray, size: tuple[int, int], canvas: tuple[int, int] | None = None
+) -> np.ndarray:
     """Label image(s) (H, W) or (B, H, W) at the network's (h, w): centred on ``canvas`` (map
     pixels) when given, then the nearest-neighbour resize (`tactile.resize.resize_labels`).
     Same dtype."""
@@ -36,8 +38,9 @@ def net_labels(labels: np.ndarray, size: tuple[int, int],
     return resize_labels(labels, size)
 
 
-def labels_on_map(labels: np.ndarray, shape: tuple[int, int],
-                  canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
+def labels_on_map(
+    labels: np.ndarray, shape: tuple[int, int], canvas: tuple[int, int] | None = None
+) -> np.ndarray:
     """The way back of `net_labels`: network labels (h, w) to the map's (H, W) pixels, through
     ``canvas`` (H', W') map pixels when the model has one (nearest neighbour, then off the
     canvas). Same dtype."""

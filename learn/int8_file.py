@@ -48,27 +48,40 @@ def refuse_int8(ckpt: Mapping, where: str | Path, why: str) -> None:
     networks")."""
     if is_int8(ckpt):
         source = ckpt[INT8_KEY].get("source") or "the float checkpoint it was made from"
-        raise ConfigError(f"{where} is an int8 network (handskin quantize), and {why}. Fix: "
-                          f"give {source}, or run the int8 file alone with handskin predict or "
-                          "handskin evaluate")  # fmt: skip
+        raise ConfigError(
+            f"{where} is an int8 network (handskin quantize), and {why}. Fix: "
+            f"give {source}, or run the int8 file alone with handskin predict or "
+            "handskin evaluate"
+        )
 
 
-def int8_checkpoint(ckpt: Mapping, net: Int8Classifier, calibration_data: str | Path,
-                    n_images: int, source: str | Path | None = None) -> dict:  # fmt: skip
+def int8_checkpoint(
+    ckpt: Mapping,
+    net: Int8Classifier,
+    calibration_data: str | Path,
+    n_images: int,
+    source: str | Path | None = None,
+) -> dict:
     """The int8 file's dict: float checkpoint ``ckpt`` without its training state, plus ``net``
     (`learn.quantize.quantize_int8` of its model, calibrated on ``n_images`` train-split images
     of ``calibration_data``; ``source``: the float checkpoint's path)."""
     if is_int8(ckpt):
-        raise ConfigError("the checkpoint is already an int8 network. Fix: quantize the float "
-                          f"checkpoint it was made from ({ckpt[INT8_KEY].get('source')})")
+        raise ConfigError(
+            "the checkpoint is already an int8 network. Fix: quantize the float "
+            f"checkpoint it was made from ({ckpt[INT8_KEY].get('source')})"
+        )
     out = {k: v for k, v in ckpt.items() if k not in TRAINING_STATE}
     seed = ((ckpt.get("config") or {}).get("train") or {}).get("seed")
     out[INT8_KEY] = {
         "model": net.state_dict(),  # keeps its _metadata: the packed layers' format versions
         "backend": BACKEND,
         "torch": str(torch.__version__),
-        "calibration": {"data": str(calibration_data), "images": int(n_images),
-                        "split": "train", "seed": seed},
+        "calibration": {
+            "data": str(calibration_data),
+            "images": int(n_images),
+            "split": "train",
+            "seed": seed,
+        },
         "source": None if source is None else str(source),
     }
     return out
@@ -82,15 +95,21 @@ def int8_from_saved(model: nn.Module, ckpt: Mapping) -> Int8Classifier:
     try:
         return load_int8_state(int8_skeleton(model), saved["model"])
     except (RuntimeError, KeyError) as err:
-        raise DataError(f"the int8 network in this file (written by torch {saved.get('torch')}) "
-                        f"does not load into torch {torch.__version__}'s quantized HandsNet "
-                        f"({str(err).splitlines()[0]}). Fix: quantize the float checkpoint "
-                        f"again: handskin quantize {saved.get('source') or 'BEST.pt'}") from err
+        raise DataError(
+            f"the int8 network in this file (written by torch {saved.get('torch')}) "
+            f"does not load into torch {torch.__version__}'s quantized HandsNet "
+            f"({str(err).splitlines()[0]}). Fix: quantize the float checkpoint "
+            f"again: handskin quantize {saved.get('source') or 'BEST.pt'}"
+        ) from err
 
 
 def calibration_note(ckpt: Mapping) -> dict:
     """What a report says of a saved int8 network's calibration (JSON-able)."""
     cal = ckpt[INT8_KEY]["calibration"]
-    return {"backend": ckpt[INT8_KEY]["backend"], "calibration_images": cal["images"],
-            "calibration_split": cal["split"], "calibration_data": cal["data"],
-            "saved": True}  # fmt: skip
+    return {
+        "backend": ckpt[INT8_KEY]["backend"],
+        "calibration_images": cal["images"],
+        "calibration_split": cal["split"],
+        "calibration_data": cal["data"],
+        "saved": True,
+    }

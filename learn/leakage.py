@@ -68,13 +68,19 @@ def _seen(a: Path, b: Path) -> list[set] | None:
         return None
     with DatasetReader(a) as ra:
         train = ra.splits["train"]
-        return [set(_ids(ra, f)[train].tolist()) - {-1} if ok else set()
-                for f, ok in zip(("subject_id", "instance_id"), same, strict=True)]  # fmt: skip
+        return [
+            set(_ids(ra, f)[train].tolist()) - {-1} if ok else set()
+            for f, ok in zip(("subject_id", "instance_id"), same, strict=True)
+        ]
 
 
-def shared_groups(train_data: str | Path | Sequence[str | Path], test_data: str | Path,
-                  among: np.ndarray | None = None, *,
-                  own_split: bool = False) -> dict | None:  # fmt: skip
+def shared_groups(
+    train_data: str | Path | Sequence[str | Path],
+    test_data: str | Path,
+    among: np.ndarray | None = None,
+    *,
+    own_split: bool = False,
+) -> dict | None:
     """Subjects and object instances of ``train_data``'s train split (of each, for several
     datasets: a model's :func:`lineage`) that are in ``test_data``'s test split, when the two are
     different datasets that can share them: subjects when both were drawn from one subject pool
@@ -109,8 +115,9 @@ def shared_groups(train_data: str | Path | Sequence[str | Path], test_data: str 
     with DatasetReader(b) as rb:
         test = rb.splits["test"] if among is None else np.asarray(among, dtype=np.int64)
         ids = [_ids(rb, f)[test] for f in fields]
-        mine_train = [set(_ids(rb, f)[rb.splits["train"]].tolist()) - {-1} if own else set()
-                      for f in fields]  # fmt: skip
+        mine_train = [
+            set(_ids(rb, f)[rb.splits["train"]].tolist()) - {-1} if own else set() for f in fields
+        ]
     hit, own_hit = np.zeros(len(test), dtype=bool), np.zeros(len(test), dtype=bool)
     shared = []
     for known, own_known, mine in zip(seen, mine_train, ids, strict=True):
@@ -118,8 +125,13 @@ def shared_groups(train_data: str | Path | Sequence[str | Path], test_data: str 
         shared.append(both)
         hit |= np.isin(mine, both)
         own_hit |= np.isin(mine, sorted(own_known))
-    return {"subjects": shared[0], "instances": shared[1], "test_samples": int(hit.sum()),
-            "n_test": len(test), "own_split_samples": int(own_hit.sum())}  # fmt: skip
+    return {
+        "subjects": shared[0],
+        "instances": shared[1],
+        "test_samples": int(hit.sum()),
+        "n_test": len(test),
+        "own_split_samples": int(own_hit.sum()),
+    }
 
 
 def test_hands(data_path: str | Path) -> np.ndarray | None:
@@ -137,19 +149,25 @@ def leakage_note(shared: dict | None) -> str | None:
     """The report's warning for :func:`shared_groups`' result, None when nothing is shared."""
     if not shared or not shared["test_samples"]:
         return None
-    head = (f"**Not held out**: {shared['test_samples']} of the {shared['n_test']} test samples "
-            f"come from {len(shared['subjects'])} subjects and {len(shared['instances'])} object "
-            "instances this model was trained on")
+    head = (
+        f"**Not held out**: {shared['test_samples']} of the {shared['n_test']} test samples "
+        f"come from {len(shared['subjects'])} subjects and {len(shared['instances'])} object "
+        "instances this model was trained on"
+    )
     own = shared.get("own_split_samples", 0)
     if own:
-        return (f"{head}: this dataset's own train and test splits share them ({own} test "
-                "samples), as a split by sample does (a copy from docs/resplit_by_sample.py, or "
-                "a split edited by hand). Fix: score it on a dataset split by person, as "
-                "handskin generate and ingest split them.")
-    return (f"{head}, or a checkpoint it started from or learned from "
-            "(`learn.leakage.lineage`: those training datasets share people or objects "
-            "with this one but not its split). Fix: score it on its own dataset's test split, "
-            "or generate them with --split keyed and one seed.")
+        return (
+            f"{head}: this dataset's own train and test splits share them ({own} test "
+            "samples), as a split by sample does (a copy from docs/resplit_by_sample.py, or "
+            "a split edited by hand). Fix: score it on a dataset split by person, as "
+            "handskin generate and ingest split them."
+        )
+    return (
+        f"{head}, or a checkpoint it started from or learned from "
+        "(`learn.leakage.lineage`: those training datasets share people or objects "
+        "with this one but not its split). Fix: score it on its own dataset's test split, "
+        "or generate them with --split keyed and one seed."
+    )
 
 
 def own_split_note(data_path: str | Path, among: np.ndarray | None = None) -> str | None:
@@ -160,10 +178,12 @@ def own_split_note(data_path: str | Path, among: np.ndarray | None = None) -> st
     shared = shared_groups([data_path], data_path, among, own_split=True)
     if not shared or not shared["own_split_samples"]:
         return None
-    return (f"{shared['own_split_samples']} of the {shared['n_test']} test samples of "
-            f"{data_path} come from {len(shared['subjects'])} subjects and "
-            f"{len(shared['instances'])} object instances of its own train split (a split by "
-            "sample, not by person): this run's test scores will not be held out")
+    return (
+        f"{shared['own_split_samples']} of the {shared['n_test']} test samples of "
+        f"{data_path} come from {len(shared['subjects'])} subjects and "
+        f"{len(shared['instances'])} object instances of its own train split (a split by "
+        "sample, not by person): this run's test scores will not be held out"
+    )
 
 
 def lineage(ckpt: Mapping | None) -> list[dict]:

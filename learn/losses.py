@@ -70,8 +70,9 @@ def weighted_cross_entropy(
     against ``(1 − ε)·target + ε / C`` (Szegedy et al., 2016).
     """
     w = None if weights is None else torch.as_tensor(weights, dtype=logits.dtype).to(logits.device)
-    return nn.functional.cross_entropy(logits, target, weight=w, ignore_index=ignore_index,
-                                       label_smoothing=label_smoothing)  # fmt: skip
+    return nn.functional.cross_entropy(
+        logits, target, weight=w, ignore_index=ignore_index, label_smoothing=label_smoothing
+    )
 
 
 def soft_dice_loss(
@@ -112,14 +113,20 @@ class SegmentationLoss(nn.Module):
 
     NAMES = ("ce", "weighted_ce", "dice", "generalized_dice", "ce_dice")
 
-    def __init__(self, name: str = "ce", weights: Sequence[float] | np.ndarray | None = None,
-                 label_smoothing: float = 0.0):  # fmt: skip
+    def __init__(
+        self,
+        name: str = "ce",
+        weights: Sequence[float] | np.ndarray | None = None,
+        label_smoothing: float = 0.0,
+    ):
         super().__init__()
         if name not in self.NAMES:
             raise ConfigError(f"unknown loss {name!r}; choose one of: {', '.join(self.NAMES)}")
         if label_smoothing and name in ("dice", "generalized_dice"):
-            raise ConfigError(f"label smoothing applies to cross-entropy, not loss {name!r}. "
-                              "Fix: label_smoothing = 0, or loss ce / weighted_ce / ce_dice")
+            raise ConfigError(
+                f"label smoothing applies to cross-entropy, not loss {name!r}. "
+                "Fix: label_smoothing = 0, or loss ce / weighted_ce / ce_dice"
+            )
         if not 0 <= label_smoothing < 1:
             raise ConfigError(f"label_smoothing must be in [0, 1), not {label_smoothing}")
         self.label_smoothing = float(label_smoothing)
@@ -132,9 +139,11 @@ class SegmentationLoss(nn.Module):
     def forward(self, logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """Scalar loss of ``logits (B, C, ...)`` against ``target (B, ...)`` int64."""
         if self.name == "ce_dice":
-            return (weighted_cross_entropy(logits, target, label_smoothing=self.label_smoothing)
-                    + soft_dice_loss(logits, target))  # fmt: skip
+            return weighted_cross_entropy(
+                logits, target, label_smoothing=self.label_smoothing
+            ) + soft_dice_loss(logits, target)
         if self.name.endswith("dice"):
             return soft_dice_loss(logits, target, generalized=self.name == "generalized_dice")
-        return weighted_cross_entropy(logits, target, self.weights,
-                                      label_smoothing=self.label_smoothing)  # fmt: skip
+        return weighted_cross_entropy(
+            logits, target, self.weights, label_smoothing=self.label_smoothing
+        )

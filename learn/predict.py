@@ -57,8 +57,9 @@ class Predictor:
     def logits(self, image: np.ndarray, step_mm: float = 1.0) -> torch.Tensor:
         """Logits of one (H, W) uint8 image on a map grid of ``step_mm`` mm per pixel (used
         only with a canvas), made into the network input: (C,) or (C, h, w)."""
-        x = net_input(np.asarray(image, np.float32) / 255.0, self.input_size, self.task,
-                      self.canvas(step_mm))  # fmt: skip
+        x = net_input(
+            np.asarray(image, np.float32) / 255.0, self.input_size, self.task, self.canvas(step_mm)
+        )
         with torch.inference_mode(), flushing():
             return self.model(torch.from_numpy(x)[None, None])[0].float()
 
@@ -88,8 +89,11 @@ def load_predictor(
         members = [(m.path, m.ckpt, m.model, m.run) for m in load_members(path, int8_ok=True)]
     nets = []
     for where, ckpt, model, run in members:
-        fast = (int8_from_checkpoint(model, run, ckpt, calibration) if int8 or is_int8(ckpt)
-                else fast_inference(model))  # fmt: skip
+        fast = (
+            int8_from_checkpoint(model, run, ckpt, calibration)
+            if int8 or is_int8(ckpt)
+            else fast_inference(model)
+        )
         nets.append(FlipTTA(fast, tta_views(run, where)) if tta else fast)
     _, ckpt, _, run = members[0]
     names = tuple(ckpt.get("class_names") or ())
@@ -130,8 +134,12 @@ def segment(image: np.ndarray, seg: Predictor, step_mm: float = 1.0) -> np.ndarr
     return np.where(image > 0, back, 0).astype(np.uint8)
 
 
-def predict_image(image: np.ndarray, clf: Predictor | None = None,
-                  seg: Predictor | None = None, step_mm: float = 1.0) -> Prediction:  # fmt: skip
+def predict_image(
+    image: np.ndarray,
+    clf: Predictor | None = None,
+    seg: Predictor | None = None,
+    step_mm: float = 1.0,
+) -> Prediction:
     """Class and segmentation of one (H, W) uint8 tactile image on a map grid of ``step_mm``
     mm per pixel (the default map's 1 mm; it matters only to a model with a canvas)."""
     if clf is None and seg is None:
@@ -144,21 +152,27 @@ def predict_image(image: np.ndarray, clf: Predictor | None = None,
     return pred
 
 
-def predict_frame(p: np.ndarray, tmap: TactileMap, clf: Predictor | None = None,
-                  seg: Predictor | None = None,
-                  threshold_pa: float = 0.0) -> Prediction:  # fmt: skip
+def predict_frame(
+    p: np.ndarray,
+    tmap: TactileMap,
+    clf: Predictor | None = None,
+    seg: Predictor | None = None,
+    threshold_pa: float = 0.0,
+) -> Prediction:
     """Prediction of a taxel frame ``p`` (N,) pressures (Pa) through the map: the tactile image,
     its class / segmentation, per-taxel labels (``backproject``) and ``part_summary`` (taxels
     above ``threshold_pa``, Pa)."""
     p = np.asarray(p, np.float64)
     if p.shape != (tmap.n_taxels,):
         raise DataError(f"frame has shape {p.shape}; the map has {tmap.n_taxels} taxels")
-    return attach_taxels(predict_image(tmap.image(p), clf, seg, tmap.step_mm), tmap, p,
-                         threshold_pa)  # fmt: skip
+    return attach_taxels(
+        predict_image(tmap.image(p), clf, seg, tmap.step_mm), tmap, p, threshold_pa
+    )
 
 
-def attach_taxels(pred: Prediction, tmap: TactileMap, p: np.ndarray,
-                  threshold_pa: float = 0.0) -> Prediction:  # fmt: skip
+def attach_taxels(
+    pred: Prediction, tmap: TactileMap, p: np.ndarray, threshold_pa: float = 0.0
+) -> Prediction:
     """Fill ``pressure`` (N,) Pa and, with a segmentation, ``taxel_labels`` (back-projected) and
     ``parts`` (taxels with p > ``threshold_pa`` per predicted part). Returns ``pred``."""
     pred.pressure, pred.threshold_pa = np.asarray(p, np.float64), float(threshold_pa)
@@ -196,21 +210,34 @@ def read_sample(path: str | Path, index: int) -> Sample:
         raise DataError(f"no dataset at {path}. Fix: give a folder holding dataset.h5")
     with DatasetReader(path) as ds:
         if not 0 <= index < len(ds):
-            raise DataError(f"--index {index} out of range; {path} has {len(ds)} samples "
-                            f"(0..{len(ds) - 1})")  # fmt: skip
-        truth = [np.asarray(ds[f][index], np.uint8) if f in ds.fields else None
-                 for f in ("label_image", "taxel_label")]  # fmt: skip
-        return Sample(index, np.asarray(ds.image[index], np.uint8),
-                      ds.pressure_from_raw(ds.raw[index]), ds.map, *truth,
-                      active_threshold_pa(ds))  # fmt: skip
+            raise DataError(
+                f"--index {index} out of range; {path} has {len(ds)} samples (0..{len(ds) - 1})"
+            )
+        truth = [
+            np.asarray(ds[f][index], np.uint8) if f in ds.fields else None
+            for f in ("label_image", "taxel_label")
+        ]
+        return Sample(
+            index,
+            np.asarray(ds.image[index], np.uint8),
+            ds.pressure_from_raw(ds.raw[index]),
+            ds.map,
+            *truth,
+            active_threshold_pa(ds),
+        )
 
 
-def predict_sample(sample: Sample, clf: Predictor | None = None,
-                   seg: Predictor | None = None) -> Prediction:  # fmt: skip
+def predict_sample(
+    sample: Sample, clf: Predictor | None = None, seg: Predictor | None = None
+) -> Prediction:
     """Prediction of a dataset sample (its stored image), ground truth attached; parts count
     the taxels above the dataset's active threshold (``sample.threshold_pa``)."""
-    pred = attach_taxels(predict_image(sample.image, clf, seg, sample.tmap.step_mm), sample.tmap,
-                         sample.pressure, sample.threshold_pa)  # fmt: skip
+    pred = attach_taxels(
+        predict_image(sample.image, clf, seg, sample.tmap.step_mm),
+        sample.tmap,
+        sample.pressure,
+        sample.threshold_pa,
+    )
     pred.true_segmentation, pred.true_labels = sample.true_segmentation, sample.true_labels
     return pred
 
@@ -219,8 +246,9 @@ def check_inputs(image, frame, map_, data, index, clf, seg, save_labels) -> None
     """``handskin predict``'s option combinations (paths or None; ``clf`` and ``seg`` lists of
     paths or None; ``index`` int or None), checked before any work: ConfigError / DataError
     naming the option and the fix."""
-    if sum(x is not None for x in (image, frame, data)) != 1 or (frame is not None
-                                                               and map_ is None):  # fmt: skip
+    if sum(x is not None for x in (image, frame, data)) != 1 or (
+        frame is not None and map_ is None
+    ):
         raise ConfigError("give one input: --image, --frame with --map, or --data with --index")
     if (data is None) != (index is None):
         raise ConfigError("--data and --index go together (a dataset and a sample of it)")
@@ -230,8 +258,10 @@ def check_inputs(image, frame, map_, data, index, clf, seg, save_labels) -> None
         if not path.is_file():
             raise DataError(f"no checkpoint at {path}. Fix: give a .pt file from handskin train")
     if save_labels is not None and (not seg or image is not None):
-        raise ConfigError("--save-labels needs --segmenter and a map: --frame with --map, or "
-                          "--data with --index (an image alone has no taxels)")
+        raise ConfigError(
+            "--save-labels needs --segmenter and a map: --frame with --map, or "
+            "--data with --index (an image alone has no taxels)"
+        )
     if save_labels is not None and save_labels.suffix != ".npy":
         raise ConfigError(f"--save-labels {save_labels}: give a .npy file name")
 
@@ -252,8 +282,10 @@ def read_frame(path: str | Path, layout: TaxelLayout) -> np.ndarray:
         return arr
     if layout.n_channels is not None and len(arr) == layout.n_channels:
         return layout.taxels_from_channels(arr)
-    raise DataError(f"{path}: {len(arr)} values; the layout has {layout.n_taxels} taxels "
-                    f"and {layout.n_channels} channels. Fix: one row of either width")  # fmt: skip
+    raise DataError(
+        f"{path}: {len(arr)} values; the layout has {layout.n_taxels} taxels "
+        f"and {layout.n_channels} channels. Fix: one row of either width"
+    )
 
 
 def load_map(path: str | Path, step_mm: float = 1.0):
@@ -286,27 +318,36 @@ def save_figures(pred: Prediction, path: str | Path, name: str = "predicted") ->
     from tactile.figures import part_bars_figure, prediction_figure, save_figure
 
     path = Path(path)
-    title = "" if pred.class_name is None else \
-        f"classifier: {pred.class_name} (p = {pred.probability:.3f})"
+    title = (
+        ""
+        if pred.class_name is None
+        else f"classifier: {pred.class_name} (p = {pred.probability:.3f})"
+    )
     if pred.segmentation is None:
         fig = _image_figure(pred.image, title)
     else:
-        fig = prediction_figure(pred.image, pred.true_segmentation, pred.segmentation,
-                                title=title, pred_name=name)  # fmt: skip
+        fig = prediction_figure(
+            pred.image, pred.true_segmentation, pred.segmentation, title=title, pred_name=name
+        )
     out = [save_figure(fig, path, dpi=90)]
     if pred.taxel_labels is not None:
-        bars = part_bars_figure(pred.true_labels, pred.pressure, pred_labels=pred.taxel_labels,
-                                threshold_pa=pred.threshold_pa,
-                                title=f"taxels above {pred.threshold_pa:g} Pa per hand part; "
-                                f"hatched: {name}, back-projected")  # fmt: skip
+        bars = part_bars_figure(
+            pred.true_labels,
+            pred.pressure,
+            pred_labels=pred.taxel_labels,
+            threshold_pa=pred.threshold_pa,
+            title=f"taxels above {pred.threshold_pa:g} Pa per hand part; "
+            f"hatched: {name}, back-projected",
+        )
         out.append(save_figure(bars, path.with_name(f"{path.stem}_parts.png"), dpi=90))
     return out
 
 
 def _image_figure(image: np.ndarray, title: str) -> Figure:
     """The tactile image (H, W) uint8 alone, ``title`` above (classifier only)."""
-    fig = Figure(figsize=(13 / 4, 1.0 + 13 / 4 * image.shape[0] / image.shape[1]),
-                 layout="constrained")  # fmt: skip
+    fig = Figure(
+        figsize=(13 / 4, 1.0 + 13 / 4 * image.shape[0] / image.shape[1]), layout="constrained"
+    )
     ax = fig.subplots()
     ax.imshow(image, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
     ax.set_title(title or "tactile image", fontsize=9)

@@ -15,38 +15,81 @@ import typer
 from learn.cli import _fail, _opt
 from tactile.errors import ConfigError, HandskinError
 
-ImageOpt = _opt(Path | None, "A tactile image file (grey PNG/JPG, any size in pixels; taken "
-                "as 1 mm per pixel by a model with an input canvas).")
+ImageOpt = _opt(
+    Path | None,
+    "A tactile image file (grey PNG/JPG, any size in pixels; taken "
+    "as 1 mm per pixel by a model with an input canvas).",
+)
 FrameOpt = _opt(Path | None, "A taxel frame (.csv row or .npy) of N taxel or C channel values.")
-MapOpt = _opt(Path | None, "For --frame: a dataset folder (its map; values are raw counts, "
-              "converted to Pa) or a layout file (values taken as Pa).", "--map")
-PredDataOpt = _opt(Path | None, "A dataset folder: predict its sample --index (the stored "
-                   "image; raw counts converted to Pa; the ground truth shown when stored).")
+MapOpt = _opt(
+    Path | None,
+    "For --frame: a dataset folder (its map; values are raw counts, "
+    "converted to Pa) or a layout file (values taken as Pa).",
+    "--map",
+)
+PredDataOpt = _opt(
+    Path | None,
+    "A dataset folder: predict its sample --index (the stored "
+    "image; raw counts converted to Pa; the ground truth shown when stored).",
+)
 IndexOpt = _opt(int | None, "Sample of --data (count, 0-based).")
-ClfOpt = Annotated[list[Path] | None, typer.Option(metavar="<path>", help=(
-    "Classifier checkpoint (.pt file); give it again to average several networks' softmax (an "
-    "ensemble, about the sum of their times)."))]
-SegOpt = Annotated[list[Path] | None, typer.Option(metavar="<path>", help=(
-    "Segmenter checkpoint (.pt file); give it again to average several networks' softmax (an "
-    "ensemble, about the sum of their times)."))]
-PngOpt = _opt(Path | None, "Write the Figs. 12-13 figure here (PNG, 90 dpi: image, truth when "
-              "known, prediction, errors in red) and Fig. 18's per-part bars (kPa, taxel "
-              "count) beside it as <stem>_parts.png.")
-LabelsOpt = _opt(Path | None, "Write the per-taxel predicted class ids here (.npy, (N,) uint8 "
-                 "0..6, no unit) for: handskin view DATASET --sample I --color prediction "
-                 "--pred FILE.npy.")
+ClfOpt = Annotated[
+    list[Path] | None,
+    typer.Option(
+        metavar="<path>",
+        help=(
+            "Classifier checkpoint (.pt file); give it again to average several networks' "
+            "softmax (an ensemble, about the sum of their times)."
+        ),
+    ),
+]
+SegOpt = Annotated[
+    list[Path] | None,
+    typer.Option(
+        metavar="<path>",
+        help=(
+            "Segmenter checkpoint (.pt file); give it again to average several networks' "
+            "softmax (an ensemble, about the sum of their times)."
+        ),
+    ),
+]
+PngOpt = _opt(
+    Path | None,
+    "Write the Figs. 12-13 figure here (PNG, 90 dpi: image, truth when "
+    "known, prediction, errors in red) and Fig. 18's per-part bars (kPa, taxel "
+    "count) beside it as <stem>_parts.png.",
+)
+LabelsOpt = _opt(
+    Path | None,
+    "Write the per-taxel predicted class ids here (.npy, (N,) uint8 "
+    "0..6, no unit) for: handskin view DATASET --sample I --color prediction "
+    "--pred FILE.npy.",
+)
 StepOpt = _opt(float, "Grid step of the map built from a layout file, mm/pixel.")
-ThresholdOpt = _opt(float | None, "Per-part counts and means take taxels above this pressure, "
-                    "Pa (default: the dataset's active-taxel threshold for --data, else 0).")
-PredTtaOpt = _opt(bool, "Test-time flips: each network's mean softmax over the views it was "
-                  "trained on (original, columns and rows reversed); about 3x the time.", "--tta")
-PredInt8Opt = _opt(bool, "The classifier (HandsNet) as its 8-bit integer copy (learn.quantize: "
-                   "about 1.6x faster on an AVX2 CPU), calibrated on 512 training images of "
-                   "--calibration or of the data it was trained on; the segmenter stays float.",
-                   "--int8")
-CalibrationOpt = _opt(Path | None, "For --int8: a dataset or image folder of the same skin "
-                      "whose train split sets the 8-bit ranges (default: the classifier "
-                      "checkpoint's training data).")
+ThresholdOpt = _opt(
+    float | None,
+    "Per-part counts and means take taxels above this pressure, "
+    "Pa (default: the dataset's active-taxel threshold for --data, else 0).",
+)
+PredTtaOpt = _opt(
+    bool,
+    "Test-time flips: each network's mean softmax over the views it was "
+    "trained on (original, columns and rows reversed); about 3x the time.",
+    "--tta",
+)
+PredInt8Opt = _opt(
+    bool,
+    "The classifier (HandsNet) as its 8-bit integer copy (learn.quantize: "
+    "about 1.6x faster on an AVX2 CPU), calibrated on 512 training images of "
+    "--calibration or of the data it was trained on; the segmenter stays float.",
+    "--int8",
+)
+CalibrationOpt = _opt(
+    Path | None,
+    "For --int8: a dataset or image folder of the same skin "
+    "whose train split sets the 8-bit ranges (default: the classifier "
+    "checkpoint's training data).",
+)
 
 
 def predict_command(
@@ -102,12 +145,15 @@ def _check_int8(int8: bool, calibration: Path | None, classifier: list[Path] | N
     if calibration is not None and not int8:
         raise ConfigError("--calibration sets the ranges of the int8 classifier; add --int8")
     if int8 and not classifier:
-        raise ConfigError("--int8 makes the classifier (HandsNet) 8-bit; give --classifier "
-                          "(the segmenters run in float)")  # fmt: skip
+        raise ConfigError(
+            "--int8 makes the classifier (HandsNet) 8-bit; give --classifier "
+            "(the segmenters run in float)"
+        )
 
 
-def _predictor(P, paths: list[Path] | None, tta: bool, int8: bool = False,
-               calibration: Path | None = None):  # fmt: skip
+def _predictor(
+    P, paths: list[Path] | None, tta: bool, int8: bool = False, calibration: Path | None = None
+):
     """None, one network, or the mean softmax of several (``--segmenter`` given twice)."""
     if not paths:
         return None

@@ -58,8 +58,10 @@ class Int8Classifier(nn.Module):
         """``(B, C, H, W)`` float → ``(B, num_classes)`` float32 logits."""
         size = getattr(self, "input_size", None)
         if size is not None and tuple(x.shape[-2:]) != tuple(size):
-            raise ConfigError(f"int8 classifier built for input_size {tuple(size)} got images of "
-                              f"size {tuple(x.shape[-2:])}. Fix: resize the images")  # fmt: skip
+            raise ConfigError(
+                f"int8 classifier built for input_size {tuple(size)} got images of "
+                f"size {tuple(x.shape[-2:])}. Fix: resize the images"
+            )
         return self.body(x.float().contiguous())
 
 
@@ -83,10 +85,12 @@ def traceable_body(model: nn.Module) -> nn.Module:
     """HandsNet's ``features`` then ``classifier``, the part FX can trace (its forward checks
     the input size with Python control flow). ConfigError for any other network."""
     if type(model).__name__ != "HandsNet":
-        raise ConfigError(f"int8 inference covers HandsNet, the real-time classifier; got "
-                          f"{type(model).__name__} (the VGG16 encoder's pooling returns indices, "
-                          "which FX quantization cannot observe). Fix: score or run it "
-                          "without --int8")  # fmt: skip
+        raise ConfigError(
+            f"int8 inference covers HandsNet, the real-time classifier; got "
+            f"{type(model).__name__} (the VGG16 encoder's pooling returns indices, "
+            "which FX quantization cannot observe). Fix: score or run it "
+            "without --int8"
+        )
     return nn.Sequential(model.features, model.classifier)
 
 
@@ -97,16 +101,21 @@ def quantize_int8(model: nn.Module, calibration: torch.Tensor) -> Int8Classifier
     too few or non-finite calibration images, or a PyTorch without the oneDNN engine."""
     body = traceable_body(model)
     if calibration.ndim != 4 or len(calibration) < MIN_CALIBRATION:
-        raise ConfigError(f"int8 calibration needs at least {MIN_CALIBRATION} images (N, C, H, W); "
-                          f"got shape {tuple(calibration.shape)}. Fix: calibrate on more "
-                          "training images")  # fmt: skip
+        raise ConfigError(
+            f"int8 calibration needs at least {MIN_CALIBRATION} images (N, C, H, W); "
+            f"got shape {tuple(calibration.shape)}. Fix: calibrate on more "
+            "training images"
+        )
     if not torch.isfinite(calibration).all():
-        raise ConfigError("int8 calibration images contain NaN or infinite values. Fix: pass "
-                          "images in [0, 1]")  # fmt: skip
+        raise ConfigError(
+            "int8 calibration images contain NaN or infinite values. Fix: pass images in [0, 1]"
+        )
     if not int8_supported():
-        raise ConfigError(f"this PyTorch build has no {BACKEND} quantized engine (it has "
-                          f"{torch.backends.quantized.supported_engines}). Fix: evaluate "
-                          "without --int8")  # fmt: skip
+        raise ConfigError(
+            f"this PyTorch build has no {BACKEND} quantized engine (it has "
+            f"{torch.backends.quantized.supported_engines}). Fix: evaluate "
+            "without --int8"
+        )
     return Int8Classifier(_observed_and_converted(body, calibration), model).eval()
 
 
@@ -124,8 +133,9 @@ def _no_fx_stack_traces() -> Iterator[None]:
         fx_config.do_not_emit_stack_traces = before
 
 
-def _observed_and_converted(body: nn.Module, calibration: torch.Tensor,
-                            qconfig_mapping=None) -> nn.Module:  # fmt: skip
+def _observed_and_converted(
+    body: nn.Module, calibration: torch.Tensor, qconfig_mapping=None
+) -> nn.Module:
     """FX-quantized copy of ``body``, its activation ranges observed on ``calibration``
     (``qconfig_mapping``: the backend's default, histogram observers, when None)."""
     from torch.ao.quantization import get_default_qconfig_mapping
@@ -181,14 +191,22 @@ def load_int8_state(net: Int8Classifier, state: dict) -> Int8Classifier:
 N_CALIBRATION = 512
 
 
-def calibration_images(data_path, run, hand_classes: tuple[str, ...] | None,
-                       n: int = N_CALIBRATION) -> torch.Tensor:  # fmt: skip
+def calibration_images(
+    data_path, run, hand_classes: tuple[str, ...] | None, n: int = N_CALIBRATION
+) -> torch.Tensor:
     """``n`` images (n, 1, h, w) of the train split of a dataset or image folder, drawn by the
     run's seed, at the run's input size (``run``: the checkpoint's `RunConfig`)."""
     from learn.folder import materialize, open_split
 
-    split = open_split(data_path, "train", run.task, run.model.input_size, hand_classes,
-                       run.train.seed, run.model.canvas_mm)  # fmt: skip
+    split = open_split(
+        data_path,
+        "train",
+        run.task,
+        run.model.input_size,
+        hand_classes,
+        run.train.seed,
+        run.model.canvas_mm,
+    )
     gen = torch.Generator().manual_seed(run.train.seed)
     pick = torch.randperm(len(split), generator=gen)[:n].sort().values
     return materialize(torch.utils.data.Subset(split, pick.tolist()), "int8 calibration").x
@@ -201,17 +219,24 @@ def calibration_source(ckpt: dict, calibration: str | Path | None = None) -> Pat
     recorded = (ckpt.get("data") or {}).get("path")
     where = Path(calibration) if calibration is not None else Path(recorded) if recorded else None
     if where is None or not where.exists():
-        what = (f"--calibration {calibration} was not found" if calibration is not None else
-                f"the checkpoint's training data {recorded} is not here" if recorded else
-                "the checkpoint does not say what it was trained on")  # fmt: skip
-        raise ConfigError(f"int8 needs training images to set its activation ranges; {what}. "
-                          "Fix: pass --calibration DATASET (a dataset or image folder of the "
-                          "same skin; its train split is used)")  # fmt: skip
+        what = (
+            f"--calibration {calibration} was not found"
+            if calibration is not None
+            else f"the checkpoint's training data {recorded} is not here"
+            if recorded
+            else "the checkpoint does not say what it was trained on"
+        )
+        raise ConfigError(
+            f"int8 needs training images to set its activation ranges; {what}. "
+            "Fix: pass --calibration DATASET (a dataset or image folder of the "
+            "same skin; its train split is used)"
+        )
     return where
 
 
-def int8_from_checkpoint(model: nn.Module, run, ckpt: dict,
-                         calibration: str | Path | None = None) -> Int8Classifier:  # fmt: skip
+def int8_from_checkpoint(
+    model: nn.Module, run, ckpt: dict, calibration: str | Path | None = None
+) -> Int8Classifier:
     """The int8 copy of a checkpoint's HandsNet ``model`` (``run``: its `RunConfig`, both from
     `learn.checkpoint.model_from_checkpoint`), calibrated on `N_CALIBRATION` images
     of the train split of `calibration_source`. An int8 file (``handskin quantize``,
@@ -221,10 +246,12 @@ def int8_from_checkpoint(model: nn.Module, run, ckpt: dict,
     from learn.int8_file import INT8_KEY, is_int8
 
     if is_int8(ckpt) and calibration is not None:
-        raise ConfigError("--calibration: this classifier is an int8 file, calibrated on "
-                          f"{ckpt[INT8_KEY]['calibration']['data']} when it was written. "
-                          "Fix: drop --calibration, or quantize its float checkpoint again "
-                          "with handskin quantize --calibration")  # fmt: skip
+        raise ConfigError(
+            "--calibration: this classifier is an int8 file, calibrated on "
+            f"{ckpt[INT8_KEY]['calibration']['data']} when it was written. "
+            "Fix: drop --calibration, or quantize its float checkpoint again "
+            "with handskin quantize --calibration"
+        )
     return int8_with_note(model, run, ckpt, calibration)[0]
 
 

@@ -16,15 +16,25 @@ import typer
 from learn.cli import _fail, _opt
 from tactile.errors import ConfigError, HandskinError
 
-QuantCkptArg = Annotated[Path, typer.Argument(help="HandsNet checkpoint (.pt file written by "
-                                              "handskin train).")]  # fmt: skip
-QuantOutOpt = _opt(Path | None, "The int8 file to write (.pt; default: <checkpoint "
-                   "stem>_int8.pt beside the checkpoint). An existing int8 file is replaced; "
-                   "a float checkpoint is never written over.")
-QuantCalOpt = _opt(Path | None, "A dataset or image folder of the same skin whose train split "
-                   "sets the 8-bit activation ranges (default: the checkpoint's training data).")
-QuantImagesOpt = _opt(int, "Calibration images drawn from that train split by the run's seed "
-                      "(count, at least 16; fewer when the split is smaller).")
+QuantCkptArg = Annotated[
+    Path, typer.Argument(help="HandsNet checkpoint (.pt file written by handskin train).")
+]
+QuantOutOpt = _opt(
+    Path | None,
+    "The int8 file to write (.pt; default: <checkpoint "
+    "stem>_int8.pt beside the checkpoint). An existing int8 file is replaced; "
+    "a float checkpoint is never written over.",
+)
+QuantCalOpt = _opt(
+    Path | None,
+    "A dataset or image folder of the same skin whose train split "
+    "sets the 8-bit activation ranges (default: the checkpoint's training data).",
+)
+QuantImagesOpt = _opt(
+    int,
+    "Calibration images drawn from that train split by the run's seed "
+    "(count, at least 16; fewer when the split is smaller).",
+)
 
 
 def quantize_command(
@@ -54,12 +64,13 @@ def quantize_command(
         model, run = model_from_checkpoint(ckpt)  # refuses an int8 file
         traceable_body(model)
         if not int8_supported():
-            raise ConfigError(f"this PyTorch has no oneDNN quantized engine "
-                              f"({torch.backends.quantized.supported_engines}). Fix: run "
-                              "HandsNet in float")  # fmt: skip
+            raise ConfigError(
+                f"this PyTorch has no oneDNN quantized engine "
+                f"({torch.backends.quantized.supported_engines}). Fix: run "
+                "HandsNet in float"
+            )
         if images < MIN_CALIBRATION:
-            raise ConfigError(f"--images {images}: calibrate on at least {MIN_CALIBRATION} "
-                              "images")  # fmt: skip
+            raise ConfigError(f"--images {images}: calibrate on at least {MIN_CALIBRATION} images")
         _check_out(out, checkpoint, is_int8)
         where = calibration_source(ckpt, calibration)
         hand = (ckpt.get("data") or {}).get("hand_classes")
@@ -74,10 +85,12 @@ def quantize_command(
     size = run.model.input_size
     ms_float = cpu_ms_per_image(prepare_for_inference(model), size, 1, 50)
     ms_int8 = cpu_ms_per_image(net, size, 1, 50)
-    typer.echo(f"int8 HandsNet written to {out}: activation ranges from {len(calib)} images of "
-               f"the train split of {where}; same class as the float network on "
-               f"{100 * agree:.2f} % of them; {ms_int8:.2f} ms/image against {ms_float:.2f} "
-               f"float (CPU, 1 thread, batch 1)")  # fmt: skip
+    typer.echo(
+        f"int8 HandsNet written to {out}: activation ranges from {len(calib)} images of "
+        f"the train split of {where}; same class as the float network on "
+        f"{100 * agree:.2f} % of them; {ms_int8:.2f} ms/image against {ms_float:.2f} "
+        f"float (CPU, 1 thread, batch 1)"
+    )
 
 
 def _check_out(out: Path, checkpoint: Path, is_int8) -> None:
@@ -94,5 +107,7 @@ def _check_out(out: Path, checkpoint: Path, is_int8) -> None:
         except HandskinError:
             held = None
         if held is None or not is_int8(held):
-            raise ConfigError(f"--out {out} exists and is not an int8 file of handskin "
-                              "quantize; it is not written over. Fix: give another --out")
+            raise ConfigError(
+                f"--out {out} exists and is not an int8 file of handskin "
+                "quantize; it is not written over. Fix: give another --out"
+            )

@@ -50,31 +50,41 @@ def row_labels(rows: list[dict]) -> list[str]:
     seed (each when theirs differ), then the training data, then the run folder, then the
     file's name (``best.pt``, ``best_int8.pt``, ...; when theirs differ), added. Labels are
     unique: rows still alike are numbered (``#2``, ...), so a report never merges two of them."""
-    labels = [method_label(r) + (INT8_SUFFIX if r.get("int8") else "")
-              + (TTA_SUFFIX if r.get("tta_views") else "") for r in rows]  # fmt: skip
-    for extra, only_if_differs in ((size_label, True),
-                                   (lambda r: width_label(r) or "default width", True),
-                                   (dropout_label, True),
-                                   (init_label, True),
-                                   (epochs_label, True),
-                                   (optimizer_label, True),
-                                   (precision_label, True),
-                                   (views_label, True),
-                                   (averaging_label, True),
-                                   (smoothing_label, True),
-                                   (types_label, True),
-                                   (teacher_label, True),
-                                   (lambda r: f"seed {r.get('seed')}", True),
-                                   (data_name, False),
-                                   (lambda r: Path(r["checkpoint"]).parent.name, False),
-                                   (lambda r: Path(r["checkpoint"]).name, True)):
+    labels = [
+        method_label(r)
+        + (INT8_SUFFIX if r.get("int8") else "")
+        + (TTA_SUFFIX if r.get("tta_views") else "")
+        for r in rows
+    ]
+    for extra, only_if_differs in (
+        (size_label, True),
+        (lambda r: width_label(r) or "default width", True),
+        (dropout_label, True),
+        (init_label, True),
+        (epochs_label, True),
+        (optimizer_label, True),
+        (precision_label, True),
+        (views_label, True),
+        (averaging_label, True),
+        (smoothing_label, True),
+        (types_label, True),
+        (teacher_label, True),
+        (lambda r: f"seed {r.get('seed')}", True),
+        (data_name, False),
+        (lambda r: Path(r["checkpoint"]).parent.name, False),
+        (lambda r: Path(r["checkpoint"]).name, True),
+    ):
         groups: dict[str, set[str]] = {}
         for lab, r in zip(labels, rows, strict=True):
             groups.setdefault(lab, set()).add(extra(r))
-        dup = {lab for lab in labels if labels.count(lab) > 1
-               and (len(groups[lab]) > 1 or not only_if_differs)}  # fmt: skip
-        labels = [f"{lab}, {extra(r)}" if lab in dup else lab
-                  for lab, r in zip(labels, rows, strict=True)]  # fmt: skip
+        dup = {
+            lab
+            for lab in labels
+            if labels.count(lab) > 1 and (len(groups[lab]) > 1 or not only_if_differs)
+        }
+        labels = [
+            f"{lab}, {extra(r)}" if lab in dup else lab for lab, r in zip(labels, rows, strict=True)
+        ]
     seen: Counter[str] = Counter()
     for i, lab in enumerate(labels):
         seen[lab] += 1
@@ -146,9 +156,12 @@ def views_label(r: dict) -> str:
     cfg = r.get("config") or {}
     flips = "flips" if cfg.get("flips", True) else "no flips"
     shift, alpha = cfg.get("shift_px") or 0, cfg.get("mixup_alpha") or 0.0
-    return (flips + (" + 180°" if cfg.get("rot180") else "")
-            + (f" + shifts ±{shift} px" if shift else "")
-            + (f" + mixup α {alpha:g}" if alpha else ""))  # fmt: skip
+    return (
+        flips
+        + (" + 180°" if cfg.get("rot180") else "")
+        + (f" + shifts ±{shift} px" if shift else "")
+        + (f" + mixup α {alpha:g}" if alpha else "")
+    )
 
 
 def averaging_label(r: dict) -> str:
@@ -180,8 +193,10 @@ def teacher_label(r: dict) -> str:
     if not cfg.get("distill_from"):
         return "no teacher"
     teacher = Path(str(cfg["distill_from"]))
-    return (f"distilled from {teacher.parent.name or teacher.name} (a "
-            f"{cfg.get('distill_weight', 0.5):g}, T {cfg.get('distill_temperature', 4.0):g})")
+    return (
+        f"distilled from {teacher.parent.name or teacher.name} (a "
+        f"{cfg.get('distill_weight', 0.5):g}, T {cfg.get('distill_temperature', 4.0):g})"
+    )
 
 
 def init_label(r: dict) -> str:

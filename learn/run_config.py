@@ -21,8 +21,12 @@ from tactile.errors import ConfigError
 
 PRECISIONS = ("fp32", "bf16")  # RunConfig.precision: the training forward pass's number format
 DEVICE_PATTERN = r"cpu|cuda(:\d+)?"  # RunConfig.device: the CPU, or a CUDA GPU (by index)
-TASK_OF_ARCH = {"handsnet": "classify", "vgg16": "classify", "segnet": "segment",
-                "fcn16s": "segment"}  # fmt: skip
+TASK_OF_ARCH = {
+    "handsnet": "classify",
+    "vgg16": "classify",
+    "segnet": "segment",
+    "fcn16s": "segment",
+}
 
 
 @dataclass(frozen=True)
@@ -81,8 +85,10 @@ class RunConfig:
 
     def __post_init__(self) -> None:
         if self.model.arch not in TASK_OF_ARCH:
-            raise ConfigError(f"unknown arch {self.model.arch!r}; choose one of: "
-                              f"{', '.join(sorted(TASK_OF_ARCH))}")  # fmt: skip
+            raise ConfigError(
+                f"unknown arch {self.model.arch!r}; choose one of: "
+                f"{', '.join(sorted(TASK_OF_ARCH))}"
+            )
         if not 0.0 <= self.val_fraction < 1.0:
             raise ConfigError(f"RunConfig.val_fraction must be in [0, 1), not {self.val_fraction}")
         half = min(self.model.input_size) // 2
@@ -121,7 +127,7 @@ class RunConfig:
                 f"RunConfig.distill_from={self.distill_from!r} (arch {self.model.arch!r}, "
                 f"mixup_alpha {self.mixup_alpha}): distillation gives each training image its "
                 "teacher's class probabilities, so it needs a classifier (handsnet, vgg16) and "
-                "unmixed images. Fix: distill_from = \"\" (off), or a classifier with "
+                'unmixed images. Fix: distill_from = "" (off), or a classifier with '
                 "mixup_alpha = 0"
             )
         if self.patience_epochs < 0 or self.threads < 1 or self.eval_batch_size < 1:

@@ -41,8 +41,9 @@ def restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None, he
     try:  # keys added since the checkpoint was written take their defaults (the old behaviour)
         theirs = to_dict(run_from_dict(ckpt["config"]))
     except ConfigError as err:
-        raise ConfigError(f"{out / LAST}: its configuration does not load ({err}); use a new "
-                          "--out") from err  # fmt: skip
+        raise ConfigError(
+            f"{out / LAST}: its configuration does not load ({err}); use a new --out"
+        ) from err
     mine = to_dict(run)
     mine["train"] = {**mine["train"], "epochs": None}  # may change on resume: the schedule's
     theirs["train"] = {**theirs["train"], "epochs": None}  # length, and where the run trains
@@ -62,8 +63,14 @@ def restore(out: Path, run: RunConfig, model, optimizer, scheduler, ema=None, he
         head.load_state_dict(ckpt["type_head"])
     best = out / BEST
     best_state = load_checkpoint(best)["model"] if best.is_file() else weights_copy(model)
-    return (int(ckpt["epoch"]), float(ckpt["best_metric"]), list(ckpt["history"]), best_state,
-            ckpt.get("init"), ckpt.get("ancestry"))  # fmt: skip
+    return (
+        int(ckpt["epoch"]),
+        float(ckpt["best_metric"]),
+        list(ckpt["history"]),
+        best_state,
+        ckpt.get("init"),
+        ckpt.get("ancestry"),
+    )
 
 
 def improved(metric: float, best: float) -> bool:
@@ -72,8 +79,12 @@ def improved(metric: float, best: float) -> bool:
     return not math.isnan(metric) and (math.isnan(best) or metric > best)
 
 
-def check_stop(stop_after_epoch: int | None, run: RunConfig, out_dir: str | Path | None = None,
-               resume: bool = False) -> None:  # fmt: skip
+def check_stop(
+    stop_after_epoch: int | None,
+    run: RunConfig,
+    out_dir: str | Path | None = None,
+    resume: bool = False,
+) -> None:
     """ConfigError unless ``stop_after_epoch`` ends an epoch that :func:`fit` would train for
     ``run`` (resumed from ``out_dir/last.pt`` when ``resume``): checked before data is loaded."""
     last = None if out_dir is None else Path(out_dir) / LAST
@@ -81,15 +92,18 @@ def check_stop(stop_after_epoch: int | None, run: RunConfig, out_dir: str | Path
     check_stop_epoch(stop_after_epoch, start, run.train.epochs, last)
 
 
-def check_stop_epoch(stop_after_epoch: int | None, start: int, epochs: int,
-                     last: Path | None) -> None:  # fmt: skip
+def check_stop_epoch(
+    stop_after_epoch: int | None, start: int, epochs: int, last: Path | None
+) -> None:
     """Refuse a stop epoch that could not end an epoch of this (possibly resumed) run."""
     if stop_after_epoch is None:
         return
     if not 1 <= stop_after_epoch <= epochs:
-        raise ConfigError(f"stop after epoch {stop_after_epoch}: the run's epochs are 1 to "
-                          f"{epochs}. Fix: give one of them (the schedule's length is "
-                          "train.epochs)")  # fmt: skip
+        raise ConfigError(
+            f"stop after epoch {stop_after_epoch}: the run's epochs are 1 to "
+            f"{epochs}. Fix: give one of them (the schedule's length is "
+            "train.epochs)"
+        )
     if stop_after_epoch <= start:
         raise ConfigError(
             f"{last} already holds epoch {start}, so stopping after epoch "
@@ -107,8 +121,22 @@ def patience_out(history: list[dict], run: RunConfig) -> bool:
     return max(vals[-k:]) <= max(v for v in vals[:-k] if not math.isnan(v))
 
 
-def save(out, name, model, optimizer, scheduler, run, data: Data, epoch, best, history,
-          init_from=None, ema=None, head=None, ancestry=None) -> None:  # fmt: skip
+def save(
+    out,
+    name,
+    model,
+    optimizer,
+    scheduler,
+    run,
+    data: Data,
+    epoch,
+    best,
+    history,
+    init_from=None,
+    ema=None,
+    head=None,
+    ancestry=None,
+) -> None:
     """Write ``out/name`` (``LAST`` or ``BEST``) for the epoch just trained (0-based ``epoch``);
     nothing when ``out`` is None. ``ema`` / ``head``: kept in last.pt to resume them.
     ``ancestry``: the data records of the checkpoints it started from and learned from
@@ -119,9 +147,19 @@ def save(out, name, model, optimizer, scheduler, run, data: Data, epoch, best, h
     if head is not None:  # last.pt: to resume the type head (best.pt holds the plain network)
         extra["type_head"] = head.state_dict()
     ckpt = make_checkpoint(
-        model, to_dict(run), epoch=epoch + 1, best_metric=best, optimizer=optimizer,
-        scheduler=scheduler, history=history, class_names=list(data.class_names),
-        seed=run.train.seed, task=run.task, data=data.description,
-        init="random" if init_from is None else str(init_from), ancestry=ancestry or [], **extra,
-    )  # fmt: skip
+        model,
+        to_dict(run),
+        epoch=epoch + 1,
+        best_metric=best,
+        optimizer=optimizer,
+        scheduler=scheduler,
+        history=history,
+        class_names=list(data.class_names),
+        seed=run.train.seed,
+        task=run.task,
+        data=data.description,
+        init="random" if init_from is None else str(init_from),
+        ancestry=ancestry or [],
+        **extra,
+    )
     save_checkpoint(ckpt, out / name)

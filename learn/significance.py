@@ -34,8 +34,9 @@ def accuracy_interval(n_correct: int, n: int, level: float = LEVEL) -> tuple[flo
     """Exact (Clopper–Pearson) two-sided interval of an accuracy, as fractions (lo, hi), from
     ``n_correct`` right of ``n`` test samples; ValueError when the counts are impossible."""
     if not 0 <= n_correct <= n or n < 1:
-        raise ValueError(f"accuracy_interval: need 0 <= n_correct <= n and n >= 1, got "
-                         f"{n_correct} of {n}")  # fmt: skip
+        raise ValueError(
+            f"accuracy_interval: need 0 <= n_correct <= n and n >= 1, got {n_correct} of {n}"
+        )
     ci = binomtest(n_correct, n).proportion_ci(confidence_level=level, method="exact")
     return float(ci.low), float(ci.high)
 
@@ -53,8 +54,11 @@ def per_image_confusion(pred: np.ndarray, truth: np.ndarray, num_classes: int) -
     """Every test image's own confusion matrix, (S, C, C) float64 pixel counts (rows: truth),
     of (S, h, w) predicted and true class ids."""
     s, c = len(truth), num_classes
-    codes = (np.arange(s)[:, None] * c * c + truth.reshape(s, -1).astype(np.int64) * c
-             + pred.reshape(s, -1))  # fmt: skip
+    codes = (
+        np.arange(s)[:, None] * c * c
+        + truth.reshape(s, -1).astype(np.int64) * c
+        + pred.reshape(s, -1)
+    )
     return np.bincount(codes.ravel(), minlength=s * c * c).reshape(s, c, c).astype(np.float64)
 
 
@@ -67,15 +71,17 @@ def batched_mean_iou(cm: np.ndarray) -> np.ndarray:
     return (iou * present).sum(1) / present.sum(1)
 
 
-def mean_iou_interval(cms: np.ndarray, level: float = LEVEL, resamples: int = N_RESAMPLES,
-                      seed: int = BOOTSTRAP_SEED) -> tuple[float, float]:  # fmt: skip
+def mean_iou_interval(
+    cms: np.ndarray, level: float = LEVEL, resamples: int = N_RESAMPLES, seed: int = BOOTSTRAP_SEED
+) -> tuple[float, float]:
     """Percentile bootstrap interval (lo, hi) of the pooled mIoU of (S, C, C) per-image
     confusion matrices: the test images drawn with replacement ``resamples`` times (each image
     its own group of `learn.cluster_bootstrap.grouped_mean_iou_interval`)."""
     from learn.cluster_bootstrap import grouped_mean_iou_interval, sample_groups
 
-    return grouped_mean_iou_interval(cms, sample_groups(None, None, n=len(cms)), level,
-                                     resamples, seed)  # fmt: skip
+    return grouped_mean_iou_interval(
+        cms, sample_groups(None, None, n=len(cms)), level, resamples, seed
+    )
 
 
 def _wrong(r: dict) -> set[int]:
@@ -122,10 +128,13 @@ def _groups_sentence(rows: list[dict]) -> list[str]:
     if first is None:
         return []
     counts = ", ".join(f"{n} {name}" for name, n in group_counts(first["test_groups"]).items())
-    return ["", f"*Subjects resampled*: a percentile bootstrap ({N_RESAMPLES:,} resamples, "
-            f"seeded) that redraws the test split's {counts} — each with all its samples — "
-            "instead of single samples. Prints of one person are alike, so this is the honest "
-            "width; the per-sample interval is too narrow."]  # fmt: skip
+    return [
+        "",
+        f"*Subjects resampled*: a percentile bootstrap ({N_RESAMPLES:,} resamples, "
+        f"seeded) that redraws the test split's {counts} — each with all its samples — "
+        "instead of single samples. Prints of one person are alike, so this is the honest "
+        "width; the per-sample interval is too narrow.",
+    ]
 
 
 def paired(a: dict, b: dict) -> dict[str, float]:
@@ -134,15 +143,20 @@ def paired(a: dict, b: dict) -> dict[str, float]:
     ``only_a_right``, ``only_b_right``, ``difference`` (accuracy of A minus B, fraction), ``p``."""
     wa, wb = _wrong(a), _wrong(b)
     only_a, only_b = len(wb - wa), len(wa - wb)
-    return {"only_a_right": only_a, "only_b_right": only_b,
-            "difference": (only_a - only_b) / int(np.sum(a["cm"])), "p": mcnemar_p(only_a, only_b)}
+    return {
+        "only_a_right": only_a,
+        "only_b_right": only_b,
+        "difference": (only_a - only_b) / int(np.sum(a["cm"])),
+        "p": mcnemar_p(only_a, only_b),
+    }
 
 
 def _paired_rows(rows: list[dict], labels: list[str]) -> list[tuple[dict, str]]:
     """The rows (with labels) that list their errors by sample index, when they all have as
     many test samples (one `handskin evaluate` run on a handskin dataset: one test split)."""
-    listed = [(r, lab) for r, lab in zip(rows, labels, strict=True)
-              if r.get("errors") is not None]  # None: scored on image folders, not listed
+    listed = [
+        (r, lab) for r, lab in zip(rows, labels, strict=True) if r.get("errors") is not None
+    ]  # None: scored on image folders, not listed
     return listed if len({int(np.sum(r["cm"])) for r, _ in listed}) == 1 else []
 
 
@@ -151,35 +165,50 @@ def significance_markdown(rows: list[dict], labels: list[str]) -> list[str]:
     interval and, when the rows share their test samples, every pair's McNemar test."""
     if not rows:
         return []
-    out = _interval_head("Classification: how sure the accuracies are",
-                         f"Each accuracy with its exact {100 * LEVEL:g} % binomial "
-                         "(Clopper–Pearson) interval over the test samples, and with test "
-                         "subjects resampled:", "test samples", "accuracy %", rows)  # fmt: skip
+    out = _interval_head(
+        "Classification: how sure the accuracies are",
+        f"Each accuracy with its exact {100 * LEVEL:g} % binomial "
+        "(Clopper–Pearson) interval over the test samples, and with test "
+        "subjects resampled:",
+        "test samples",
+        "accuracy %",
+        rows,
+    )
     for r, lab in zip(rows, labels, strict=True):
         cm = np.asarray(r["cm"])
         k, n = int(np.trace(cm)), int(cm.sum())
-        out.append(f"| {lab} | {n:,} | {100 * k / n:.2f} | {_span(accuracy_interval(k, n))} | "
-                   f"{_grouped(r)} |")
+        out.append(
+            f"| {lab} | {n:,} | {100 * k / n:.2f} | {_span(accuracy_interval(k, n))} | "
+            f"{_grouped(r)} |"
+        )
     listed = _paired_rows(rows, labels)
     pairs = list(combinations(listed, 2))
     if not pairs:
         return [*out, ""]
     unpaired = [lab for lab in labels if lab not in {la for _, la in listed}]
-    out += ["", "Every two classifiers on the same test samples, McNemar's exact test on the "
-            "samples exactly one of them gets right (p two-sided; a small p says the difference "
-            "is not test-set luck among independent samples). The last column redraws whole "
-            "test subjects instead: when its interval holds 0, the difference could come from "
-            "which persons and objects were held out:", "",
-            "| A | B | A − B (points) | only A right | only B right | p | "
-            f"A − B {100 * LEVEL:g} % interval, subjects resampled (points) |",
-            "|---|---|---|---|---|---|---|"]  # fmt: skip
+    out += [
+        "",
+        "Every two classifiers on the same test samples, McNemar's exact test on the "
+        "samples exactly one of them gets right (p two-sided; a small p says the difference "
+        "is not test-set luck among independent samples). The last column redraws whole "
+        "test subjects instead: when its interval holds 0, the difference could come from "
+        "which persons and objects were held out:",
+        "",
+        "| A | B | A − B (points) | only A right | only B right | p | "
+        f"A − B {100 * LEVEL:g} % interval, subjects resampled (points) |",
+        "|---|---|---|---|---|---|---|",
+    ]
     for (ra, la), (rb, lb) in pairs:
         c = paired(ra, rb)
-        out.append(f"| {la} | {lb} | {100 * c['difference']:+.2f} | {c['only_a_right']} | "
-                   f"{c['only_b_right']} | {_p(c['p'])} | {_grouped_pair(ra, rb)} |")
+        out.append(
+            f"| {la} | {lb} | {100 * c['difference']:+.2f} | {c['only_a_right']} | "
+            f"{c['only_b_right']} | {_p(c['p'])} | {_grouped_pair(ra, rb)} |"
+        )
     if unpaired:
-        out += ["", "Not paired (their rows list no per-sample errors): " + ", ".join(unpaired)
-                + "."]  # fmt: skip
+        out += [
+            "",
+            "Not paired (their rows list no per-sample errors): " + ", ".join(unpaired) + ".",
+        ]
     return [*out, ""]
 
 
@@ -188,15 +217,21 @@ def segmentation_markdown(rows: list[dict], labels: list[str]) -> list[str]:
     shown = [(r, lab) for r, lab in zip(rows, labels, strict=True) if r.get("mean_iou_interval")]
     if not shown:
         return []
-    out = _interval_head("Segmentation: how sure the mIoUs are",
-                         f"Each mIoU with its {100 * LEVEL:g} % percentile bootstrap interval "
-                         f"({N_RESAMPLES:,} resamples of the test images, seeded), and with "
-                         "test subjects resampled:", "test images", "mIoU %",
-                         [r for r, _ in shown])  # fmt: skip
+    out = _interval_head(
+        "Segmentation: how sure the mIoUs are",
+        f"Each mIoU with its {100 * LEVEL:g} % percentile bootstrap interval "
+        f"({N_RESAMPLES:,} resamples of the test images, seeded), and with "
+        "test subjects resampled:",
+        "test images",
+        "mIoU %",
+        [r for r, _ in shown],
+    )
     for r, lab in shown:
         grouped = r.get("mean_iou_interval_groups")
-        out.append(f"| {lab} | {r['n_test']:,} | {100 * r['metrics']['mean_iou']:.2f} | "
-                   f"{_span(r['mean_iou_interval'])} | {_span(grouped) if grouped else '—'} |")
+        out.append(
+            f"| {lab} | {r['n_test']:,} | {100 * r['metrics']['mean_iou']:.2f} | "
+            f"{_span(r['mean_iou_interval'])} | {_span(grouped) if grouped else '—'} |"
+        )
     return [*out, *_segmenter_pairs(shown), ""]
 
 
@@ -207,21 +242,29 @@ def _segmenter_pairs(shown: list[tuple[dict, str]]) -> list[str]:
     from learn.cluster_bootstrap import sample_groups
 
     listed = [(r, lab) for r, lab in shown if r.get("per_image_cm") is not None]
-    pairs = [(a, b) for a, b in combinations(listed, 2)
-             if a[0].get("test_indices") == b[0].get("test_indices")]  # fmt: skip
+    pairs = [
+        (a, b)
+        for a, b in combinations(listed, 2)
+        if a[0].get("test_indices") == b[0].get("test_indices")
+    ]
     if not pairs:
         return []
-    out = ["", "Every two segmenters on the same test images: mIoU A − B with paired "
-           f"{100 * LEVEL:g} % intervals (both redrawn together: single images, then whole "
-           "test subjects); an interval that holds 0 leaves the order open:", "",
-           "| A | B | A − B (points) | interval, images resampled | interval, subjects resampled |",
-           "|---|---|---|---|---|"]  # fmt: skip
+    out = [
+        "",
+        "Every two segmenters on the same test images: mIoU A − B with paired "
+        f"{100 * LEVEL:g} % intervals (both redrawn together: single images, then whole "
+        "test subjects); an interval that holds 0 leaves the order open:",
+        "",
+        "| A | B | A − B (points) | interval, images resampled | interval, subjects resampled |",
+        "|---|---|---|---|---|",
+    ]
     for (ra, la), (rb, lb) in pairs:
         cms_a, cms_b = np.asarray(ra["per_image_cm"], float), np.asarray(rb["per_image_cm"], float)
         images = diff_interval(cms_a, cms_b, sample_groups(None, None, n=len(cms_a)))
         groups = ra.get("test_groups")
-        subjects = "—" if groups is None else _signed(diff_interval(cms_a, cms_b,
-                                                                   np.asarray(groups)))
+        subjects = (
+            "—" if groups is None else _signed(diff_interval(cms_a, cms_b, np.asarray(groups)))
+        )
         d = ra["metrics"]["mean_iou"] - rb["metrics"]["mean_iou"]
         out.append(f"| {la} | {lb} | {100 * d:+.2f} | {_signed(images)} | {subjects} |")
     return out
@@ -232,12 +275,20 @@ def _signed(interval) -> str:
     return f"{100 * lo:+.2f} to {100 * hi:+.2f}"
 
 
-def _interval_head(title: str, sentence: str, count: str, score: str,
-                   rows: list[dict]) -> list[str]:  # fmt: skip
+def _interval_head(
+    title: str, sentence: str, count: str, score: str, rows: list[dict]
+) -> list[str]:
     """A section's heading, its sentences and the head of its table of intervals."""
-    return [f"## {title}", "", sentence, *_groups_sentence(rows), "",
-            f"| method | {count} | {score} | {100 * LEVEL:g} % interval % | "
-            f"{100 * LEVEL:g} % interval, subjects resampled % |", "|---|---|---|---|---|"]
+    return [
+        f"## {title}",
+        "",
+        sentence,
+        *_groups_sentence(rows),
+        "",
+        f"| method | {count} | {score} | {100 * LEVEL:g} % interval % | "
+        f"{100 * LEVEL:g} % interval, subjects resampled % |",
+        "|---|---|---|---|---|",
+    ]
 
 
 def _p(p: float) -> str:

@@ -96,8 +96,9 @@ def views_of(run: RunConfig) -> torch.Tensor:
     return torch.tensor([*(PAPER_VIEWS if run.flips else (0,)), *((3,) if run.rot180 else ())])
 
 
-def get_batch(data: TensorData, items: torch.Tensor,
-              views: torch.Tensor) -> tuple[torch.Tensor, ...]:  # fmt: skip
+def get_batch(
+    data: TensorData, items: torch.Tensor, views: torch.Tensor
+) -> tuple[torch.Tensor, ...]:
     """Images (B, 1, h, w) and targets (B,) or (B, h, w) of items ``sample * V + k``: sample
     ``sample`` in view ``views[k]`` (``views`` (V,) from `views_of`)."""
     sample, view = items // len(views), views[items % len(views)]
@@ -115,8 +116,17 @@ def make_loss(run: RunConfig, train: TensorData, validation: bool = False) -> nn
     return SegmentationLoss(name, weights, 0.0 if validation else run.train.label_smoothing)
 
 
-def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, progress: bool,
-                head: TypeHead | None = None, distiller: Distiller | None = None):  # fmt: skip
+def train_epoch(
+    model,
+    data,
+    loss_fn,
+    optimizer,
+    run: RunConfig,
+    epoch: int,
+    progress: bool,
+    head: TypeHead | None = None,
+    distiller: Distiller | None = None,
+):
     """One epoch over a seeded permutation of (sample, view) pairs; returns the mean loss (with
     the type head's term, and the teacher's with a ``distiller``, `learn.distill`). Batches are
     drawn and augmented on the CPU, then moved to ``run.device``."""
@@ -124,8 +134,15 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
     views = views_of(run)
     order = torch.randperm(len(data.y) * len(views))
     model.train()
-    total, bar = 0.0, tqdm(range(0, len(order), run.train.batch_size), disable=not progress,
-                           desc=f"epoch {epoch + 1}/{run.train.epochs}", leave=False)  # fmt: skip
+    total, bar = (
+        0.0,
+        tqdm(
+            range(0, len(order), run.train.batch_size),
+            disable=not progress,
+            desc=f"epoch {epoch + 1}/{run.train.epochs}",
+            leave=False,
+        ),
+    )
     for start in bar:
         items = order[start : start + run.train.batch_size]
         x, y = get_batch(data, items, views)
@@ -140,10 +157,17 @@ def train_epoch(model, data, loss_fn, optimizer, run: RunConfig, epoch: int, pro
     return total / len(order)
 
 
-def train_step(model, loss_fn, optimizer, x: torch.Tensor, y: torch.Tensor, task: str,
-               precision: str = "fp32",
-               aux: tuple[TypeHead, torch.Tensor] | None = None,
-               distill: tuple[Distiller, torch.Tensor] | None = None) -> float:  # fmt: skip
+def train_step(
+    model,
+    loss_fn,
+    optimizer,
+    x: torch.Tensor,
+    y: torch.Tensor,
+    task: str,
+    precision: str = "fp32",
+    aux: tuple[TypeHead, torch.Tensor] | None = None,
+    distill: tuple[Distiller, torch.Tensor] | None = None,
+) -> float:
     """One optimisation step on images ``x`` (B, 1, h, w) and targets ``y``; returns the loss.
     ``aux``: a type head and the batch's type ids (B,), whose weighted loss is added.
     ``distill``: a `learn.distill.Distiller` and the batch's training-sample indices (B,); the
@@ -181,13 +205,15 @@ def check_precision(run: RunConfig) -> None:
     check_device(run.device)
     if run.precision == "bf16" and run.device != "cpu":
         if not torch.cuda.is_bf16_supported():
-            raise ConfigError(f"precision \"bf16\": GPU {run.device!r} has no bfloat16. "
-                              'Fix: precision = "fp32" (--precision fp32)')  # fmt: skip
+            raise ConfigError(
+                f'precision "bf16": GPU {run.device!r} has no bfloat16. '
+                'Fix: precision = "fp32" (--precision fp32)'
+            )
         return
     if run.precision == "bf16" and not bf16_supported():
         raise ConfigError(
-            "precision \"bf16\" needs a CPU with native bfloat16 (AVX512-BF16 or AMX); this "
-            "one has none, so bf16 would train slower than fp32. Fix: precision = \"fp32\" "
+            'precision "bf16" needs a CPU with native bfloat16 (AVX512-BF16 or AMX); this '
+            'one has none, so bf16 would train slower than fp32. Fix: precision = "fp32" '
             "(--precision fp32)"
         )
 
@@ -252,18 +278,24 @@ def fit(
     ema = make_ema(model, optimizer, run.train.ema_decay)
     scored = model if ema is None else ema.module  # the weights validated, selected and kept
     loss_fn = make_loss(run, data.train).to(run.device)
-    val_loss_fn = (make_loss(run, data.train, validation=True).to(run.device)
-                   if run.train.label_smoothing else loss_fn)  # fmt: skip
+    val_loss_fn = (
+        make_loss(run, data.train, validation=True).to(run.device)
+        if run.train.label_smoothing
+        else loss_fn
+    )
     distiller = make_distiller(run, data, progress, teacher)
     start, best, history, best_state = 0, float("nan"), [], weights_copy(scored)
     learned_from = None  # the data records of the start and the teacher (learn.leakage.lineage)
     if resuming:
         start, best, history, best_state, first, learned_from = restore(
-            out, run, model, optimizer, scheduler, ema, head)  # fmt: skip
+            out, run, model, optimizer, scheduler, ema, head
+        )
         init_from = first if first not in (None, "random") else init_from
     if learned_from is None:
-        learned_from = ancestry(init_ckpt if init_ckpt is not None else init_from,
-                                teacher if teacher is not None else run.distill_from)  # fmt: skip
+        learned_from = ancestry(
+            init_ckpt if init_ckpt is not None else init_from,
+            teacher if teacher is not None else run.distill_from,
+        )
     check_stop_epoch(stop_after_epoch, start, run.train.epochs, None if out is None else out / LAST)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -272,17 +304,53 @@ def fit(
     for epoch in range(start, run.train.epochs):
         if on_epoch is not None:
             on_epoch(epoch, optimizer)
-        row = _one_epoch(model, data, (loss_fn, val_loss_fn), optimizer, run, epoch, progress,
-                         scored, head, distiller)  # fmt: skip
+        row = _one_epoch(
+            model,
+            data,
+            (loss_fn, val_loss_fn),
+            optimizer,
+            run,
+            epoch,
+            progress,
+            scored,
+            head,
+            distiller,
+        )
         scheduler.step()
         history.append(row)
         if improved(row.get("val_metric", float("nan")), best) or data.val is None:
             best = row.get("val_metric", best)
             best_state = weights_copy(scored)
-            save(out, BEST, scored, optimizer, scheduler, run, data, epoch, best, history,
-                 init_from, ancestry=learned_from)
-        save(out, LAST, model, optimizer, scheduler, run, data, epoch, best, history, init_from,
-             ema=ema, head=head, ancestry=learned_from)
+            save(
+                out,
+                BEST,
+                scored,
+                optimizer,
+                scheduler,
+                run,
+                data,
+                epoch,
+                best,
+                history,
+                init_from,
+                ancestry=learned_from,
+            )
+        save(
+            out,
+            LAST,
+            model,
+            optimizer,
+            scheduler,
+            run,
+            data,
+            epoch,
+            best,
+            history,
+            init_from,
+            ema=ema,
+            head=head,
+            ancestry=learned_from,
+        )
         if out is not None:
             title = f"{run.model.arch}, seed {run.train.seed}"
             best_epoch = next((h["epoch"] for h in history if h.get("val_metric") == best), None)
@@ -298,20 +366,35 @@ def fit(
 
 
 @flushing()
-def _one_epoch(model, data: Data, loss_fns, optimizer, run: RunConfig, epoch: int, progress: bool,
-               scored: nn.Module | None = None, head: TypeHead | None = None,
-               distiller: Distiller | None = None):  # fmt: skip
+def _one_epoch(
+    model,
+    data: Data,
+    loss_fns,
+    optimizer,
+    run: RunConfig,
+    epoch: int,
+    progress: bool,
+    scored: nn.Module | None = None,
+    head: TypeHead | None = None,
+    distiller: Distiller | None = None,
+):
     """Train one epoch and validate ``scored`` (default ``model``; the weight average when there
     is one): a history row (losses, val metric, lr of each group). ``loss_fns``: (training,
     validation) losses."""
     loss_fn, val_loss_fn = loss_fns
     tic = time.perf_counter()
     row = {"epoch": epoch + 1, "lr": [g["lr"] for g in optimizer.param_groups]}
-    row["train_loss"] = train_epoch(model, data.train, loss_fn, optimizer, run, epoch, progress,
-                                    head, distiller)  # fmt: skip
+    row["train_loss"] = train_epoch(
+        model, data.train, loss_fn, optimizer, run, epoch, progress, head, distiller
+    )
     if data.val is not None:
-        res = evaluate_tensors(model if scored is None else scored, data.val,
-                               run.model.num_classes, run.eval_batch_size, val_loss_fn)
+        res = evaluate_tensors(
+            model if scored is None else scored,
+            data.val,
+            run.model.num_classes,
+            run.eval_batch_size,
+            val_loss_fn,
+        )
         row["val_loss"], row["val_metric"] = res.loss, res.metrics[metric_name(run.task)]
     row["seconds"] = time.perf_counter() - tic
     return row
@@ -322,7 +405,9 @@ def _num_types(run: RunConfig, data: Data) -> int:
     if not run.aux_types_weight:
         return 0
     if data.train.types is None:
-        raise ConfigError("aux_types_weight is set but the training data carry no contactor "
-                          "types. Fix: load them with learn.train.load_data(path, run), which "
-                          "reads them for such a run")  # fmt: skip
+        raise ConfigError(
+            "aux_types_weight is set but the training data carry no contactor "
+            "types. Fix: load them with learn.train.load_data(path, run), which "
+            "reads them for such a run"
+        )
     return len(data.type_names)

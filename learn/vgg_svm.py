@@ -64,9 +64,15 @@ class VggSvmClassifier:
     pickle. ``seed`` seeds the LinearSVC solver.
     """
 
-    def __init__(self, model: VGGClassifier, cfg: VggSvmConfig | None = None,
-                 device: str = "cpu", *, seed: int = 0,
-                 run_config: dict | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: VGGClassifier,
+        cfg: VggSvmConfig | None = None,
+        device: str = "cpu",
+        *,
+        seed: int = 0,
+        run_config: dict | None = None,
+    ) -> None:
         self.model, self.cfg, self.device = model.eval(), cfg or VggSvmConfig(), device
         self.seed, self.run_config = seed, run_config
         self.mean: np.ndarray | None = None  # (D,) feature mean (0 without standardisation)
@@ -75,20 +81,25 @@ class VggSvmClassifier:
         self.learned_from: list[dict] = []  # the network's training data (learn.leakage.lineage)
 
     @classmethod
-    def from_checkpoint(cls, path: str | Path, cfg: VggSvmConfig | None = None, *,
-                        seed: int = 0) -> VggSvmClassifier:  # fmt: skip
+    def from_checkpoint(
+        cls, path: str | Path, cfg: VggSvmConfig | None = None, *, seed: int = 0
+    ) -> VggSvmClassifier:
         """Features of a vgg16 checkpoint written by ``handskin train --arch vgg16``."""
         from learn.checkpoint import load_checkpoint, model_from_checkpoint
 
         ckpt = load_checkpoint(path)
         model, run = model_from_checkpoint(ckpt)
         if run.model.arch != "vgg16":
-            raise ConfigError(f"{path} is a {run.model.arch} checkpoint; VGG16 + SVM needs a "
-                              "vgg16 one (handskin train --arch vgg16)")  # fmt: skip
+            raise ConfigError(
+                f"{path} is a {run.model.arch} checkpoint; VGG16 + SVM needs a "
+                "vgg16 one (handskin train --arch vgg16)"
+            )
         if run.model.canvas_mm is not None:
-            raise ConfigError(f"{path} centres its inputs on a {run.model.canvas_mm} mm canvas; "
-                              "VGG16 + SVM reads images stretched to the input. Fix: a VGG16 "
-                              "trained without model.canvas_mm")  # fmt: skip
+            raise ConfigError(
+                f"{path} centres its inputs on a {run.model.canvas_mm} mm canvas; "
+                "VGG16 + SVM reads images stretched to the input. Fix: a VGG16 "
+                "trained without model.canvas_mm"
+            )
         from learn.leakage import lineage
 
         out = cls(model, cfg, seed=seed, run_config=ckpt["config"])
@@ -153,8 +164,13 @@ class VggSvmClassifier:
         seed, run_config = cfg.pop("seed"), cfg.pop("vgg_run")
         run = run_from_dict(run_config)
         model = create_model(run.model.arch, **run.model.kwargs())
-        model.load_state_dict({k[4:]: torch.from_numpy(np.array(v)) for k, v in arrays.items()
-                               if k.startswith("vgg.")})  # fmt: skip
+        model.load_state_dict(
+            {
+                k[4:]: torch.from_numpy(np.array(v))
+                for k, v in arrays.items()
+                if k.startswith("vgg.")
+            }
+        )
         out = cls(model, from_dict(VggSvmConfig, cfg), seed=seed, run_config=run_config)
         out.mean, out.scale = arrays["mean"], arrays["scale"]
         out.svm = LinearSvm.from_arrays(arrays)

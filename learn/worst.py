@@ -20,9 +20,13 @@ N_WORST_KEPT, N_WORST_MAPS = 50, 9
 
 
 def worst_segmentations(
-    pred: np.ndarray, truth: np.ndarray, indices: Sequence[int], num_classes: int,
-    about: dict[str, Sequence] | None = None, cms: np.ndarray | None = None,
-) -> tuple[list[dict[str, object]], np.ndarray]:  # fmt: skip
+    pred: np.ndarray,
+    truth: np.ndarray,
+    indices: Sequence[int],
+    num_classes: int,
+    about: dict[str, Sequence] | None = None,
+    cms: np.ndarray | None = None,
+) -> tuple[list[dict[str, object]], np.ndarray]:
     """Every test image scored on its own, lowest mIoU first (ties by pixel accuracy, then
     test order): where a segmenter fails. pred, truth : (S, h, w) int class ids; indices :
     (S,) dataset sample indices; ``about`` : named (S,) sequences copied into each record;
@@ -44,10 +48,15 @@ def worst_segmentations(
     acc = np.diagonal(cm, axis1=1, axis2=2).sum(1) / cm.sum((1, 2))
     order = np.lexsort((np.arange(s), acc, miou))
     about = about or {}
-    records = [{"index": int(indices[k]), "mean_iou": float(miou[k]),
-                "pixel_accuracy": float(acc[k]),
-                **{name: plain_scalar(values[k]) for name, values in about.items()}}
-               for k in order]  # fmt: skip
+    records = [
+        {
+            "index": int(indices[k]),
+            "mean_iou": float(miou[k]),
+            "pixel_accuracy": float(acc[k]),
+            **{name: plain_scalar(values[k]) for name, values in about.items()},
+        }
+        for k in order
+    ]
     return records, order
 
 

@@ -74,9 +74,11 @@ def _forearm(rng: np.random.Generator) -> Built:
     z = 0.8 * half_w - wrist  # wrist bottom flush with the belly's
     ridge, proud = unif(rng, 0.010, 0.014), unif(rng, 0.002, 0.004)
     zr = -0.8 * half_w + ridge - proud
-    out = [belly, segment("wrist", "capsule", (0.1 * length, 0, z), (0.55 * length, 0, z), wrist,
-                          SOFT),
-           segment("ulna", "capsule", (-0.2 * length, 0, zr), (0.5 * length, 0, zr), ridge, THIN)]
+    out = [
+        belly,
+        segment("wrist", "capsule", (0.1 * length, 0, z), (0.55 * length, 0, z), wrist, SOFT),
+        segment("ulna", "capsule", (-0.2 * length, 0, zr), (0.5 * length, 0, zr), ridge, THIN),
+    ]
     dims = _r(length=length, half_width=half_w, wrist_radius=wrist, ulna_proud=proud)
     return out, dims, unif(rng, 1.0, 1.6)
 
@@ -87,8 +89,14 @@ def _upper_arm(rng: np.random.Generator) -> Built:
     return out, _r(radius=r, length=length), unif(rng, 1.6, 2.8)
 
 
-def _flexed(rng: np.random.Generator, tip: Prim, radii: tuple[float, float], lengths,
-            flexion_deg: tuple[float, float], above_m: float) -> tuple[list[Prim], float]:
+def _flexed(
+    rng: np.random.Generator,
+    tip: Prim,
+    radii: tuple[float, float],
+    lengths,
+    flexion_deg: tuple[float, float],
+    above_m: float,
+) -> tuple[list[Prim], float]:
     """A bony tip with two limb capsules rising at +-(flexion / 2) from its top, ``above_m``
     over the tip's centre (the elbow's and the knee's shape). Returns prims and flexion, rad."""
     flexion = np.deg2rad(unif(rng, *flexion_deg))
@@ -106,10 +114,20 @@ def _elbow(rng: np.random.Generator) -> Built:
     radii = (unif(rng, 0.035, 0.045), unif(rng, 0.040, 0.055))  # forearm, upper arm
     proud = unif(rng, 0.010, 0.015)  # the olecranon stands proud of the limbs' surface
     tip = prim("olecranon", "ellipsoid", semi, material=THIN)
-    out, flexion = _flexed(rng, tip, radii, (0.15, 0.18), (60.0, 120.0),
-                           -semi[2] + max(radii) + proud)
-    return out, _r(olecranon_half_width=semi[1], forearm_radius=radii[0],
-                   arm_radius=radii[1], proud=proud, flexion=flexion), unif(rng, 1.5, 2.5)
+    out, flexion = _flexed(
+        rng, tip, radii, (0.15, 0.18), (60.0, 120.0), -semi[2] + max(radii) + proud
+    )
+    return (
+        out,
+        _r(
+            olecranon_half_width=semi[1],
+            forearm_radius=radii[0],
+            arm_radius=radii[1],
+            proud=proud,
+            flexion=flexion,
+        ),
+        unif(rng, 1.5, 2.5),
+    )
 
 
 def _shoulder(rng: np.random.Generator) -> Built:
@@ -117,10 +135,15 @@ def _shoulder(rng: np.random.Generator) -> Built:
     semi = (unif(rng, 0.055, 0.07), unif(rng, 0.05, 0.065), unif(rng, 0.045, 0.06))
     r = unif(rng, 0.040, 0.055)
     z = semi[2] - r + 0.01  # the arm sits 1 cm back from the deltoid's surface
-    out = [prim("deltoid", "ellipsoid", semi, material=SOFT),
-           segment("arm", "capsule", (0.03, 0, z), (0.25, 0, z), r, SOFT)]
-    return out, _r(deltoid_x=semi[0], deltoid_y=semi[1], deltoid_z=semi[2], arm_radius=r), unif(
-        rng, 2.5, 4.0)
+    out = [
+        prim("deltoid", "ellipsoid", semi, material=SOFT),
+        segment("arm", "capsule", (0.03, 0, z), (0.25, 0, z), r, SOFT),
+    ]
+    return (
+        out,
+        _r(deltoid_x=semi[0], deltoid_y=semi[1], deltoid_z=semi[2], arm_radius=r),
+        unif(rng, 2.5, 4.0),
+    )
 
 
 def _trunk(rng: np.random.Generator) -> tuple[Prim, tuple[float, float, float]]:
@@ -136,10 +159,17 @@ def _chest(rng: np.random.Generator) -> Built:
     if rng.random() < 0.5:
         b = (unif(rng, 0.05, 0.07), unif(rng, 0.05, 0.07), unif(rng, 0.03, 0.05))
         bulge, y = b[2] * unif(rng, 0.3, 0.7), unif(rng, 0.08, 0.10)
-        out += [prim(f"breast{i}", "ellipsoid", b, (-0.04, s * y, -semi[2] + b[2] - bulge),
-                     material=SOFT) for i, s in enumerate((-1, 1))]
-    return out, _r(half_breadth=semi[1], half_height=semi[0], half_depth=semi[2],
-                   bulge=bulge), unif(rng, 3.0, 4.0)
+        out += [
+            prim(
+                f"breast{i}", "ellipsoid", b, (-0.04, s * y, -semi[2] + b[2] - bulge), material=SOFT
+            )
+            for i, s in enumerate((-1, 1))
+        ]
+    return (
+        out,
+        _r(half_breadth=semi[1], half_height=semi[0], half_depth=semi[2], bulge=bulge),
+        unif(rng, 3.0, 4.0),
+    )
 
 
 def _back(rng: np.random.Generator) -> Built:
@@ -147,8 +177,10 @@ def _back(rng: np.random.Generator) -> Built:
     trunk, semi = _trunk(rng)
     blade, proud, y = (0.07, 0.05, 0.02), unif(rng, 0.01, 0.02), unif(rng, 0.07, 0.10)
     z = -semi[2] + blade[2] - proud
-    out = [trunk] + [prim(f"scapula{i}", "ellipsoid", blade, (0.05, s * y, z), material=SOFT)
-                     for i, s in enumerate((-1, 1))]
+    out = [trunk] + [
+        prim(f"scapula{i}", "ellipsoid", blade, (0.05, s * y, z), material=SOFT)
+        for i, s in enumerate((-1, 1))
+    ]
     dims = _r(half_breadth=semi[1], half_depth=semi[2], scapula_proud=proud)
     return out, dims, unif(rng, 3.0, 4.0)
 
@@ -158,36 +190,67 @@ def _knee(rng: np.random.Generator) -> Built:
     pat = (unif(rng, 0.025, 0.03), unif(rng, 0.0225, 0.0275), unif(rng, 0.01, 0.013))
     cond = unif(rng, 0.0425, 0.0525)
     radii = (unif(rng, 0.07, 0.10), unif(rng, 0.05, 0.065))  # thigh, calf
-    out, flexion = _flexed(rng, prim("patella", "ellipsoid", pat, material=THIN), radii,
-                           (0.2, 0.2), (60.0, 110.0), -pat[2] + max(radii) + 0.01)
-    condyles = prim("condyles", "ellipsoid", (0.04, cond, 0.04), (0, 0, 0.045 - pat[2]),
-                    material=THIN)  # 5 mm behind the patella's surface
+    out, flexion = _flexed(
+        rng,
+        prim("patella", "ellipsoid", pat, material=THIN),
+        radii,
+        (0.2, 0.2),
+        (60.0, 110.0),
+        -pat[2] + max(radii) + 0.01,
+    )
+    condyles = prim(
+        "condyles", "ellipsoid", (0.04, cond, 0.04), (0, 0, 0.045 - pat[2]), material=THIN
+    )  # 5 mm behind the patella's surface
     out.insert(1, condyles)
-    return out, _r(patella_half_width=pat[1], condyle_half_width=cond, thigh_radius=radii[0],
-                   flexion=flexion), unif(rng, 3.0, 4.0)
+    return (
+        out,
+        _r(
+            patella_half_width=pat[1],
+            condyle_half_width=cond,
+            thigh_radius=radii[0],
+            flexion=flexion,
+        ),
+        unif(rng, 3.0, 4.0),
+    )
 
 
 def _head(rng: np.random.Generator) -> Built:
     """Head ellipsoid resting on its side, back, forehead or crown."""
     semi = (unif(rng, 0.07, 0.0825), unif(rng, 0.09, 0.105), unif(rng, 0.105, 0.12))
     face = pick(rng, ("side", "back", "forehead", "crown"))
-    pose = {"side": rot("y", np.pi / 2), "back": rot("x", np.pi / 2),
-            "forehead": rot("x", -np.pi / 2), "crown": rot("x", np.pi)}[face]
+    pose = {
+        "side": rot("y", np.pi / 2),
+        "back": rot("x", np.pi / 2),
+        "forehead": rot("x", -np.pi / 2),
+        "crown": rot("x", np.pi),
+    }[face]
     out = rotate([prim("skull", "ellipsoid", semi, material=THIN)], pose)
-    return out, _r(half_breadth=semi[0], half_length=semi[1], half_height=semi[2]) | {
-        "face": face}, unif(rng, 3.5, 4.5)
+    return (
+        out,
+        _r(half_breadth=semi[0], half_length=semi[1], half_height=semi[2]) | {"face": face},
+        unif(rng, 3.5, 4.5),
+    )
 
 
 BUILDERS = {
-    "forearm": _forearm, "upper_arm": _upper_arm, "elbow": _elbow, "shoulder": _shoulder,
-    "chest": _chest, "back": _back, "knee": _knee, "head": _head,
+    "forearm": _forearm,
+    "upper_arm": _upper_arm,
+    "elbow": _elbow,
+    "shoulder": _shoulder,
+    "chest": _chest,
+    "back": _back,
+    "knee": _knee,
+    "head": _head,
 }
 BODY_KINDS: tuple[str, ...] = tuple(BUILDERS)
 _SKIN_RGBA = (0.88, 0.7, 0.6, 1.0)
 
 
-def build_body_part(kind: str, rng: np.random.Generator, instance_id: int | None = None,
-                    ) -> ContactorSpec:
+def build_body_part(
+    kind: str,
+    rng: np.random.Generator,
+    instance_id: int | None = None,
+) -> ContactorSpec:
     """Body-part contactor ``kind`` (one of `BODY_KINDS`), instance ``instance_id``.
 
     The instance depends only on (kind, instance_id); ``rng`` draws the id when it is None
@@ -200,8 +263,16 @@ def build_body_part(kind: str, rng: np.random.Generator, instance_id: int | None
     irng = instance_rng(kind, instance_id)
     prims, dims, mass_kg = BUILDERS[kind](irng)
     fill = mass_kg / (1050.0 * sum(volume_m3(p) for p in prims))
-    c = assemble(prims, "body", kind, instance_id, dims=dims,
-                 compliance=draw_compliance(irng, prims), fill=fill, prefix=PREFIX)
+    c = assemble(
+        prims,
+        "body",
+        kind,
+        instance_id,
+        dims=dims,
+        compliance=draw_compliance(irng, prims),
+        fill=fill,
+        prefix=PREFIX,
+    )
     for g in c.spec.geoms:
         g.rgba = _SKIN_RGBA
     return c
@@ -240,5 +311,3 @@ def body_press(spec: ContactorSpec, rng: np.random.Generator) -> tuple[str, Pres
 def plan_body_press(spec: ContactorSpec, rng: np.random.Generator) -> PressPlan:
     """How body part ``spec`` is pressed (see `BODY_MODES`): forces N, angles rad, times s."""
     return body_press(spec, rng)[1]
-
-

@@ -28,8 +28,10 @@ def _fail(err: Exception) -> typer.Exit:
 
 def part_command(
     name: Annotated[
-        str, typer.Argument(help="Part name: forearm, forearm_8mm, forearm_x2, forearm_x4, "
-                   "end_effector or plate.")
+        str,
+        typer.Argument(
+            help="Part name: forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector or plate."
+        ),
     ] = "forearm",
     mesh: Annotated[
         Path | None,
@@ -147,44 +149,88 @@ def assets_command(
 
 
 def generate_command(
-    out: Annotated[Path, typer.Option(help="Dataset folder (path): new, empty, or a run of the "
-                                           "same configuration to resume.")],
-    part: Annotated[str | None, typer.Option(
-        help="Part: forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector, plate, or a "
-             "link mesh file .stl/.obj (metres). "
-             "Default: forearm.")] = None,
-    n: Annotated[int | None, typer.Option(
-        "--n", help="Number of samples (count). Default: 3530 as in the paper.")] = None,
-    hand_fraction: Annotated[float | None, typer.Option(
-        help="Fraction of hand samples (unitless, 0..1). Default: 1710/3530.")] = None,
-    seed: Annotated[int | None, typer.Option(
-        help="Dataset seed (integer >= 0); sample i depends only on (seed, i). Default: 0.")
+    out: Annotated[
+        Path,
+        typer.Option(
+            help="Dataset folder (path): new, empty, or a run of the same configuration to resume."
+        ),
+    ],
+    part: Annotated[
+        str | None,
+        typer.Option(
+            help="Part: forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector, plate, or a "
+            "link mesh file .stl/.obj (metres). "
+            "Default: forearm."
+        ),
     ] = None,
-    split: Annotated[str | None, typer.Option(
-        help="Train/test split: greedy (70/30 by samples; default) or keyed (each subject's "
-             "and object instance's side fixed by the seed and its id, so datasets of one seed "
-             "on any part, of any size, hold out the same people; fractions within a few "
-             "points of 70/30).")] = None,
-    workers: Annotated[int | None, typer.Option(
-        help="Worker processes or Ray actors (count). Default: all cores. Never changes "
-             "the bytes.")] = None,
-    config: Annotated[Path | None, typer.Option(
-        help="TOML file of GenerateConfig (docs/generate.md): scene, subjects, skin, "
-             "randomization; command-line options override it.")] = None,
-    keep_sequences: Annotated[bool | None, typer.Option(
-        "--keep-sequences/--no-keep-sequences",
-        help="Also store each episode's 10 Hz raw sequence (frames x taxels, counts).")] = None,
-    chunk_size: Annotated[int | None, typer.Option(
-        help="Samples per chunk (count): the unit of atomic writes and resume. Default: 32.")
+    n: Annotated[
+        int | None,
+        typer.Option("--n", help="Number of samples (count). Default: 3530 as in the paper."),
     ] = None,
-    shard: Annotated[str, typer.Option(
-        help="i/n: compute only chunks k with k mod n = i (unitless indices); merge the shard "
-             "folders with `handskin merge`.")] = "0/1",
-    ray: Annotated[str | None, typer.Option(
-        help="Run on Ray: 'local' (start a local instance), 'auto' or an address "
-             "(needs the ray extra).")] = None,
-    print_config: Annotated[bool, typer.Option(
-        help="Print the resolved configuration (TOML) and exit without generating.")] = False,
+    hand_fraction: Annotated[
+        float | None,
+        typer.Option(help="Fraction of hand samples (unitless, 0..1). Default: 1710/3530."),
+    ] = None,
+    seed: Annotated[
+        int | None,
+        typer.Option(
+            help="Dataset seed (integer >= 0); sample i depends only on (seed, i). Default: 0."
+        ),
+    ] = None,
+    split: Annotated[
+        str | None,
+        typer.Option(
+            help="Train/test split: greedy (70/30 by samples; default) or keyed (each subject's "
+            "and object instance's side fixed by the seed and its id, so datasets of one seed "
+            "on any part, of any size, hold out the same people; fractions within a few "
+            "points of 70/30)."
+        ),
+    ] = None,
+    workers: Annotated[
+        int | None,
+        typer.Option(
+            help="Worker processes or Ray actors (count). Default: all cores. Never changes "
+            "the bytes."
+        ),
+    ] = None,
+    config: Annotated[
+        Path | None,
+        typer.Option(
+            help="TOML file of GenerateConfig (docs/generate.md): scene, subjects, skin, "
+            "randomization; command-line options override it."
+        ),
+    ] = None,
+    keep_sequences: Annotated[
+        bool | None,
+        typer.Option(
+            "--keep-sequences/--no-keep-sequences",
+            help="Also store each episode's 10 Hz raw sequence (frames x taxels, counts).",
+        ),
+    ] = None,
+    chunk_size: Annotated[
+        int | None,
+        typer.Option(
+            help="Samples per chunk (count): the unit of atomic writes and resume. Default: 32."
+        ),
+    ] = None,
+    shard: Annotated[
+        str,
+        typer.Option(
+            help="i/n: compute only chunks k with k mod n = i (unitless indices); merge the shard "
+            "folders with `handskin merge`."
+        ),
+    ] = "0/1",
+    ray: Annotated[
+        str | None,
+        typer.Option(
+            help="Run on Ray: 'local' (start a local instance), 'auto' or an address "
+            "(needs the ray extra)."
+        ),
+    ] = None,
+    print_config: Annotated[
+        bool,
+        typer.Option(help="Print the resolved configuration (TOML) and exit without generating."),
+    ] = False,
     quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
 ) -> None:
     """Generate (or resume) a labelled synthetic tactile dataset (same bytes for any --workers)."""
@@ -193,14 +239,22 @@ def generate_command(
     from tactile.config import to_toml
 
     try:
-        cfg = load_generate_config(config, part=part, n=n, hand_fraction=hand_fraction,
-                                   seed=seed, split=split, keep_sequences=keep_sequences,
-                                   chunk_size=chunk_size)
+        cfg = load_generate_config(
+            config,
+            part=part,
+            n=n,
+            hand_fraction=hand_fraction,
+            seed=seed,
+            split=split,
+            keep_sequences=keep_sequences,
+            chunk_size=chunk_size,
+        )
         if print_config:
             typer.echo(to_toml(cfg), nl=False)
             return
-        report = generate(cfg, out, workers=workers, shard=parse_shard(shard), ray=ray,
-                          progress=not quiet)
+        report = generate(
+            cfg, out, workers=workers, shard=parse_shard(shard), ray=ray, progress=not quiet
+        )
     except HandskinError as err:
         raise _fail(err) from err
     typer.echo(
@@ -208,8 +262,11 @@ def generate_command(
         f"({report.samples_per_s:.1f} samples/s); {report.n_samples} on disk; rejected episodes: "
         f"{report.rejects or 'none'}"
     )
-    typer.echo(f"dataset: {report.dataset}" if report.dataset else
-               f"shard {shard} written to {out}; merge the shards with `handskin merge`")
+    typer.echo(
+        f"dataset: {report.dataset}"
+        if report.dataset
+        else f"shard {shard} written to {out}; merge the shards with `handskin merge`"
+    )
     if report.dataset:
         typer.echo(split_line(report.dataset))
 
@@ -220,13 +277,17 @@ def split_line(dataset: Path) -> str:
 
     with open_dataset(dataset) as ds:
         test = ds.splits["test"]
-        groups = [len(set(ds[f][()][test].tolist()) - {-1}) if f in ds.fields else 0
-                  for f in ("subject_id", "instance_id")]  # fmt: skip
+        groups = [
+            len(set(ds[f][()][test].tolist()) - {-1}) if f in ds.fields else 0
+            for f in ("subject_id", "instance_id")
+        ]
         method = ds.attrs.get("split_method", "greedy")
         n = len(ds)
-    return (f"split ({method}): {n - len(test)} train / {len(test)} test samples "
-            f"({100 * (n - len(test)) / max(n, 1):.1f} % train); held out: {groups[0]} subjects, "
-            f"{groups[1]} object / body-part instances")
+    return (
+        f"split ({method}): {n - len(test)} train / {len(test)} test samples "
+        f"({100 * (n - len(test)) / max(n, 1):.1f} % train); held out: {groups[0]} subjects, "
+        f"{groups[1]} object / body-part instances"
+    )
 
 
 def merge_command(

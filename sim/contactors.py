@@ -16,7 +16,13 @@ import mujoco
 from tactile.errors import ConfigError
 
 ACTIONS: tuple[str, ...] = (
-    "grasp", "grasp_twist_cw", "grasp_twist_ccw", "push_left", "push_right", "push_away", "pull",
+    "grasp",
+    "grasp_twist_cw",
+    "grasp_twist_ccw",
+    "push_left",
+    "push_right",
+    "push_away",
+    "pull",
     "free",
 )
 OPERATOR_POSITIONS: tuple[str, ...] = ("front", "side", "free")
@@ -79,8 +85,10 @@ class PressPlan:
             raise ConfigError(f"PressPlan.force_n={self.force_n!r} must be > 0 N")
         stray = sorted(set(self.preshape) - set(self.joint_targets))
         if stray:
-            raise ConfigError(f"PressPlan.preshape names {stray} that have no joint_targets; "
-                              "give every preshape joint a target")
+            raise ConfigError(
+                f"PressPlan.preshape names {stray} that have no joint_targets; "
+                "give every preshape joint a target"
+            )
         if len(self.durations_s) != 4 or min(self.durations_s) < 0:
             raise ConfigError(f"PressPlan.durations_s={self.durations_s}: 4 values >= 0 needed")
         if not -1 <= self.action < len(ACTIONS):
@@ -104,11 +112,21 @@ def sphere_contactor(
     spec.modelname = "sphere"
     root = spec.worldbody.add_body(name=ROOT)
     root.add_geom(
-        name="sphere", type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[radius_m, 0, 0],
-        pos=[0, 0, radius_m], mass=mass_kg, priority=1, rgba=[0.9, 0.5, 0.2, 1],
+        name="sphere",
+        type=mujoco.mjtGeom.mjGEOM_SPHERE,
+        size=[radius_m, 0, 0],
+        pos=[0, 0, radius_m],
+        mass=mass_kg,
+        priority=1,
+        rgba=[0.9, 0.5, 0.2, 1],
     )
     desc = {"type": "sphere", "radius_m": radius_m, "mass_kg": mass_kg}
     return ContactorSpec(
-        spec, {"sphere": label}, "object", "sphere", instance_id=instance_id, description=desc,
+        spec,
+        {"sphere": label},
+        "object",
+        "sphere",
+        instance_id=instance_id,
+        description=desc,
         max_penetration_m=radius_m,
     )

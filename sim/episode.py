@@ -107,8 +107,9 @@ class EpisodeContext:
         if key in self._cache:
             self._cache.move_to_end(key)
             return self._cache[key]
-        scene = press.build_press_scene(self.part, contactor, self.cfg.timestep_s,
-                                        self.cfg.solver_iterations)  # fmt: skip
+        scene = press.build_press_scene(
+            self.part, contactor, self.cfg.timestep_s, self.cfg.solver_iterations
+        )
         self._cache[key] = scene
         if len(self._cache) > self.cfg.cache_size:
             self._cache.popitem(last=False)
@@ -154,7 +155,10 @@ def _check(scene: press.PressScene, depth_m: np.ndarray, max_pen_m: float) -> No
 
 
 def run_episode(
-    ctx: EpisodeContext, contactor: ContactorSpec, plan: PressPlan, rng: np.random.Generator,
+    ctx: EpisodeContext,
+    contactor: ContactorSpec,
+    plan: PressPlan,
+    rng: np.random.Generator,
     keep_release: bool = False,
 ) -> Frames:
     """Simulate ``plan`` and read the skin every `FRAME_DT_S`; EpisodeFailure when unstable.
@@ -249,15 +253,20 @@ def select_attempt(
             if frames.best_active == 0:
                 raise EpisodeFailure("no_contact", "no active taxel in any frame")
             if frames.best_active < ctx.cfg.min_active_taxels:
-                raise EpisodeFailure("few_taxels", f"{frames.best_active} active taxels < "
-                                     f"min_active_taxels = {ctx.cfg.min_active_taxels}")
+                raise EpisodeFailure(
+                    "few_taxels",
+                    f"{frames.best_active} active taxels < "
+                    f"min_active_taxels = {ctx.cfg.min_active_taxels}",
+                )
         except EpisodeFailure as failure:
             rejects[failure.reason] += 1
             continue
         return Attempt(contactor, plan, frames, ep_seed, rejects)
-    fix = ("lower episode.min_active_taxels or raise episode.max_attempts"
-           if rejects["few_taxels"] else
-           "check the contactor's force and max_penetration_m, or raise max_attempts")
+    fix = (
+        "lower episode.min_active_taxels or raise episode.max_attempts"
+        if rejects["few_taxels"]
+        else "check the contactor's force and max_penetration_m, or raise max_attempts"
+    )
     raise ConfigError(
         f"sample {index} (seed {seed}) failed {ctx.cfg.max_attempts} attempts: {dict(rejects)}. "
         f"Fix: {fix}"
@@ -280,8 +289,12 @@ def reading(ctx: EpisodeContext, frame: Frame, ep_seed: int) -> np.ndarray:
 
 
 def make_sample(
-    ctx: EpisodeContext, contactor: ContactorSpec, plan: PressPlan, frames: Frames,
-    ep_seed: int, keep_sequence: bool,
+    ctx: EpisodeContext,
+    contactor: ContactorSpec,
+    plan: PressPlan,
+    frames: Frames,
+    ep_seed: int,
+    keep_sequence: bool,
 ) -> dict:
     """The dataset sample dict (`tactile.dataset.schema`) of the best frame of ``frames``."""
     best = frames.best
@@ -292,16 +305,23 @@ def make_sample(
     label, who = label_taxels(ctx.skin, best, ctx.cfg.active_pa)
     image, label_image = tactile_images(ctx.tmap, sensed, label)
     sample = {
-        "raw": raw, "pressure_pa": best.pressure_pa.astype(np.float32),
-        "taxel_label": label.astype(np.uint8), "taxel_contactor": who.astype(np.int16),
-        "image": image, "label_image": label_image,
-        "is_hand": np.uint8(contactor.kind == "hand"), "action": np.int8(plan.action),
+        "raw": raw,
+        "pressure_pa": best.pressure_pa.astype(np.float32),
+        "taxel_label": label.astype(np.uint8),
+        "taxel_contactor": who.astype(np.int16),
+        "image": image,
+        "label_image": label_image,
+        "is_hand": np.uint8(contactor.kind == "hand"),
+        "action": np.int8(plan.action),
         "operator_position": np.int8(plan.operator_position),
         "subject_id": np.int32(contactor.subject_id),
         "instance_id": np.int32(contactor.instance_id),
-        "contactor": json.dumps({"kind": contactor.kind, "name": contactor.name,
-                                 **contactor.description}, sort_keys=True),
-        "episode_seed": np.uint64(ep_seed), "force_n": np.float32(best.force_n),
+        "contactor": json.dumps(
+            {"kind": contactor.kind, "name": contactor.name, **contactor.description},
+            sort_keys=True,
+        ),
+        "episode_seed": np.uint64(ep_seed),
+        "force_n": np.float32(best.force_n),
         "time_s": np.float32(best.time_s),
     }
     if keep_sequence:

@@ -80,7 +80,10 @@ def link_contacts(model: mujoco.MjModel, data: mujoco.MjData, link_body: int) ->
 
 
 def contact_forces_n(
-    model: mujoco.MjModel, data: mujoco.MjData, link_body: int, pressed_m: np.ndarray,
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    link_body: int,
+    pressed_m: np.ndarray,
     radius_m: float,
 ) -> tuple[float, float]:
     """(total, sensed) normal force (N) of the contacts on the link: all of them, and those whose

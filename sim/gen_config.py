@@ -96,8 +96,10 @@ class GenerateConfig:
         if self.split not in METHODS:
             raise ConfigError(f"split = {self.split!r} unknown; choose one of {', '.join(METHODS)}")
         if self.hand_detail not in HAND_DETAILS:
-            raise ConfigError(f"hand_detail = {self.hand_detail!r} unknown; choose one of "
-                              f"{', '.join(HAND_DETAILS)}")  # fmt: skip
+            raise ConfigError(
+                f"hand_detail = {self.hand_detail!r} unknown; choose one of "
+                f"{', '.join(HAND_DETAILS)}"
+            )
         if self.episode.part not in (self.part, EpisodeConfig.part):
             raise ConfigError(
                 f"episode.part = {self.episode.part!r} differs from part = {self.part!r}; "
@@ -105,8 +107,10 @@ class GenerateConfig:
             )
         object.__setattr__(self, "episode", replace(self.episode, part=self.part))
         if math.ceil(self.n / self.chunk_size) > MAX_CHUNKS:
-            raise ConfigError(f"n / chunk_size = {self.n}/{self.chunk_size} > {MAX_CHUNKS} chunks; "
-                              "raise chunk_size")
+            raise ConfigError(
+                f"n / chunk_size = {self.n}/{self.chunk_size} > {MAX_CHUNKS} chunks; "
+                "raise chunk_size"
+            )
 
     @property
     def n_chunks(self) -> int:
@@ -132,8 +136,9 @@ def check_range(name: str, value: Any, lo: float | None, hi: float | None) -> No
     ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
     ok = ok and (lo is None or value >= lo) and (hi is None or value <= hi)
     if not ok:
-        raise ConfigError(f"{name} = {value!r} is out of range; allowed [{_num(lo, '-inf')}, "
-                          f"{_num(hi, 'inf')}]")
+        raise ConfigError(
+            f"{name} = {value!r} is out of range; allowed [{_num(lo, '-inf')}, {_num(hi, 'inf')}]"
+        )
 
 
 def _num(x: float | None, unbounded: str) -> str:

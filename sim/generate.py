@@ -99,8 +99,15 @@ def run_chunks(
 
 def progress_bar(total: int, initial: int, desc: str, enabled: bool = True) -> Progress:
     """A tqdm bar over samples, starting at the samples already on disk."""
-    bar = tqdm(total=total, initial=initial, desc=desc, unit="sample", disable=not enabled,
-               smoothing=0.1, dynamic_ncols=True)  # fmt: skip
+    bar = tqdm(
+        total=total,
+        initial=initial,
+        desc=desc,
+        unit="sample",
+        disable=not enabled,
+        smoothing=0.1,
+        dynamic_ncols=True,
+    )
     return Progress(bar, Counter())
 
 
@@ -151,10 +158,16 @@ def open_writer(cfg: GenerateConfig, out: Path, ctx):
 
     attrs = ctx.skin.readout().attrs() | {"actions": list(ACTIONS)}
     return DatasetWriter(
-        out, config=cfg, part=cfg.part_id(), generator_version=generator_version(),
-        seed=cfg.seed, tmap=ctx.tmap, layout=ctx.part.layout, attrs=attrs,
+        out,
+        config=cfg,
+        part=cfg.part_id(),
+        generator_version=generator_version(),
+        seed=cfg.seed,
+        tmap=ctx.tmap,
+        layout=ctx.part.layout,
+        attrs=attrs,
         seq_len=cfg.sequence_frames if cfg.keep_sequences else None,
-    )  # fmt: skip
+    )
 
 
 def generate(
@@ -186,15 +199,25 @@ def generate(
     todo = [k for k in mine if k not in done]
     sizes = {k: min(cfg.chunk_size, cfg.n - k * cfg.chunk_size) for k in mine}
     n_workers = max(1, min(workers or default_workers(), len(todo)))
-    bar = progress_bar(sum(sizes.values()), sum(sizes[k] for k in mine if k in done),
-                       f"{out.name} ({n_workers} {'Ray actors' if ray else 'workers'})", progress)
+    bar = progress_bar(
+        sum(sizes.values()),
+        sum(sizes[k] for k in mine if k in done),
+        f"{out.name} ({n_workers} {'Ray actors' if ray else 'workers'})",
+        progress,
+    )
     with bar.bar:
         for k, samples, rejects in _results(cfg, ctx, todo, n_workers, ray):
             writer.write_chunk(k, samples, rejects=rejects)
             bar.update(len(samples), rejects)
     dataset = writer.merge(n_chunks=cfg.n_chunks) if shard[1] == 1 else None
-    return RunReport(out, dataset, sum(sizes[k] for k in todo), sum(sizes.values()),
-                     time.perf_counter() - t0, dict(sorted(bar.rejects.items())))
+    return RunReport(
+        out,
+        dataset,
+        sum(sizes[k] for k in todo),
+        sum(sizes.values()),
+        time.perf_counter() - t0,
+        dict(sorted(bar.rejects.items())),
+    )
 
 
 def _claim(cfg: GenerateConfig, out: Path, workers: int | None) -> None:
@@ -209,8 +232,9 @@ def _claim(cfg: GenerateConfig, out: Path, workers: int | None) -> None:
     claim_folder(out, manifest)
 
 
-def _results(cfg: GenerateConfig, ctx, todo: list[int], workers: int, ray: str | None
-             ) -> Iterator[ChunkResult]:  # fmt: skip
+def _results(
+    cfg: GenerateConfig, ctx, todo: list[int], workers: int, ray: str | None
+) -> Iterator[ChunkResult]:
     """Chunk results from the chosen executor (in-process, process pool, or Ray actors)."""
     from sim.sampler import init_worker, make_chunk, pool_worker_init
 
@@ -219,8 +243,9 @@ def _results(cfg: GenerateConfig, ctx, todo: list[int], workers: int, ray: str |
         return run_chunks_ray(cfg, todo, workers, ray)
     if workers == 1:
         return run_chunks(make_chunk, todo, 1)
-    return run_chunks(make_chunk, todo, workers, initializer=pool_worker_init,
-                      initargs=(cfg, os.getpid()))
+    return run_chunks(
+        make_chunk, todo, workers, initializer=pool_worker_init, initargs=(cfg, os.getpid())
+    )
 
 
 def run_chunks_ray(
@@ -273,8 +298,10 @@ def merge_shards(shards: Sequence[str | Path], out: str | Path) -> Path:
     for d, m in zip(dirs[1:], manifests[1:], strict=True):
         if m["fingerprint"] != manifests[0]["fingerprint"]:
             keys = differing_keys(manifests[0]["config"], m["config"])
-            raise DataError(f"{d} is a shard of another dataset than {dirs[0]} (differing keys: "
-                            f"{', '.join(keys) or 'part/seed/generator_version'}); not merged")
+            raise DataError(
+                f"{d} is a shard of another dataset than {dirs[0]} (differing keys: "
+                f"{', '.join(keys) or 'part/seed/generator_version'}); not merged"
+            )
     claim_folder(out, manifests[0])
     (out / CHUNKS).mkdir(exist_ok=True)
     for d in dirs:

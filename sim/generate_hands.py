@@ -22,8 +22,12 @@ from sim.subjects import Subject, sample_subjects
 POSITIONS_BY_ACTION = {a: ("free",) if a == "free" else ("front", "side") for a in ACTIONS}
 
 
-def hand_maker(subjects: list[Subject], ctx: EpisodeContext, action: str | None = None,
-               position: str | None = None):
+def hand_maker(
+    subjects: list[Subject],
+    ctx: EpisodeContext,
+    action: str | None = None,
+    position: str | None = None,
+):
     """``make(rng) -> (ContactorSpec, PressPlan)`` for `run_sample`: a random subject, action
     (uniform over `ACTIONS` unless given) and operator position (uniform over the action's)."""
 
@@ -38,8 +42,12 @@ def hand_maker(subjects: list[Subject], ctx: EpisodeContext, action: str | None 
 
 
 def sample_hand(
-    index: int, seed: int, ctx: EpisodeContext, subjects: list[Subject],
-    keep_sequence: bool = False, action: str | None = None,
+    index: int,
+    seed: int,
+    ctx: EpisodeContext,
+    subjects: list[Subject],
+    keep_sequence: bool = False,
+    action: str | None = None,
 ) -> tuple[dict, Counter]:
     """Sample ``index`` of a hand dataset: (sample dict, reject counts by reason)."""
     return run_sample(index, seed, ctx, hand_maker(subjects, ctx, action), keep_sequence)
@@ -58,8 +66,9 @@ def _sheet_samples(ctx: EpisodeContext, subjects: list[Subject], actions: list[s
     return np.stack(images), np.stack(labels), titles
 
 
-def write_hand_sheet(path: Path, n_per_action: int = 4, seed: int = 0,
-                     actions: tuple[str, ...] = ACTIONS) -> Path:
+def write_hand_sheet(
+    path: Path, n_per_action: int = 4, seed: int = 0, actions: tuple[str, ...] = ACTIONS
+) -> Path:
     """Contact sheet of ``n_per_action`` hand samples of each of ``actions``: columns = actions
     (several), or a grid of one action's samples (one action)."""
     from tactile.sheet import save_contact_sheet
@@ -70,8 +79,12 @@ def write_hand_sheet(path: Path, n_per_action: int = 4, seed: int = 0,
     images, labels, titles = _sheet_samples(ctx, subjects, slots, seed)
     what = actions[0] if len(actions) == 1 else "hand interactions"
     return save_contact_sheet(
-        path, images, labels=labels, titles=titles,
-        n_cols=len(actions) if len(actions) > 1 else 4, tile_in=1.9,
+        path,
+        images,
+        labels=labels,
+        titles=titles,
+        n_cols=len(actions) if len(actions) > 1 else 4,
+        tile_in=1.9,
         title=f"simulated {what} on the forearm (label colours over the image; tx = active taxels)",
     )
 

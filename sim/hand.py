@@ -88,9 +88,12 @@ TISSUE_SOLREF = (0.01, 1.0)  # (time constant s, damping ratio); >= 2 timesteps 
 SITE_GROUP = 5  # sites hidden in renderings by default
 HAND_DENSITY = 1100.0  # kg/m^3, soft tissue and bone
 PART_RGBA = {  # after the palette of Albini & Cannata 2020, Fig. 10
-    "thumb": (0.90, 0.30, 0.25, 1.0), "index": (0.95, 0.70, 0.20, 1.0),
-    "middle": (0.40, 0.75, 0.30, 1.0), "ring": (0.25, 0.55, 0.90, 1.0),
-    "pinkie": (0.60, 0.35, 0.80, 1.0), "palm": (0.90, 0.75, 0.65, 1.0),
+    "thumb": (0.90, 0.30, 0.25, 1.0),
+    "index": (0.95, 0.70, 0.20, 1.0),
+    "middle": (0.40, 0.75, 0.30, 1.0),
+    "ring": (0.25, 0.55, 0.90, 1.0),
+    "pinkie": (0.60, 0.35, 0.80, 1.0),
+    "palm": (0.90, 0.75, 0.65, 1.0),
 }
 # Soft-tissue allowance (solimp width) per segment, as a multiple of the subject's softness scale
 # `HandConfig.tissue_depth_m` (3.5 mm mean): palm 9.6 mm, phalanx pads 17.5 mm, fingertip pulp
@@ -125,8 +128,9 @@ class HandConfig:
         if self.side not in SIDES:
             raise ConfigError(f"HandConfig.side={self.side!r} unknown; choose one of {SIDES}")
         if self.detail not in HAND_DETAILS:
-            raise ConfigError(f"HandConfig.detail={self.detail!r} unknown; choose one of "
-                              f"{HAND_DETAILS}")  # fmt: skip
+            raise ConfigError(
+                f"HandConfig.detail={self.detail!r} unknown; choose one of {HAND_DETAILS}"
+            )
 
     @property
     def prefix(self) -> str:
@@ -245,14 +249,19 @@ class _Builder:
     def _body(self, parent, name: str, pos, quat=(1.0, 0, 0, 0)) -> mujoco.MjsBody:
         side = self.cfg.side
         return parent.add_body(
-            name=f"{self.p}{name}", pos=mirror_pos(pos, side), quat=mirror_quat(quat, side),
+            name=f"{self.p}{name}",
+            pos=mirror_pos(pos, side),
+            quat=mirror_quat(quat, side),
             gravcomp=1.0,
         )
 
     def _hinge(self, body, name: str, axis, limits_deg, armature: float = 2e-4) -> None:
         body.add_joint(
-            name=f"{self.p}{name}", axis=mirror_axis(axis, self.cfg.side), armature=armature,
-            range=np.deg2rad(limits_deg), limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            name=f"{self.p}{name}",
+            axis=mirror_axis(axis, self.cfg.side),
+            armature=armature,
+            range=np.deg2rad(limits_deg),
+            limited=mujoco.mjtLimited.mjLIMITED_TRUE,
         )
 
     def _capsule(self, body, part: str, segment: str, start, end, radius: float) -> None:
@@ -265,7 +274,11 @@ class _Builder:
         )
         self._tissue(geom, "palm" if part == "palm" else segment)
         body.add_geom(
-            self.visual, name=f"{name}_visual", type=kind, fromto=fromto, size=[radius, 0, 0],
+            self.visual,
+            name=f"{name}_visual",
+            type=kind,
+            fromto=fromto,
+            size=[radius, 0, 0],
             rgba=PART_RGBA[part],
         )
 
@@ -279,8 +292,12 @@ class _Builder:
         full detail; the flat box between the metacarpals at every detail."""
         geo = self.geo
         if self.cfg.detail == "coarse":
-            self._palm_box(body, "radial" if heel[0] > 0 else "ulnar",
-                           [geo.cmc_m[f] for f in fingers], [geo.mcp_m[f] for f in fingers])
+            self._palm_box(
+                body,
+                "radial" if heel[0] > 0 else "ulnar",
+                [geo.cmc_m[f] for f in fingers],
+                [geo.mcp_m[f] for f in fingers],
+            )
             return
         for f in fingers:
             r = geo.radii_m[f][0]
@@ -302,7 +319,11 @@ class _Builder:
         pad = body.add_geom(self.collision, name=name, type=kind, pos=pos, size=size)
         self._tissue(pad, "palm")
         body.add_geom(
-            self.visual, name=f"{name}_visual", type=kind, pos=pos, size=size,
+            self.visual,
+            name=f"{name}_visual",
+            type=kind,
+            pos=pos,
+            size=size,
             rgba=PART_RGBA["palm"],
         )
 
@@ -360,9 +381,13 @@ class _Builder:
             limit = JOINT_TORQUE_NM[key] * self.cfg.strength
             kp, ctrl = limit / SERVO_ERROR_AT_LIMIT_RAD, tuple(joint.range)
         act = self.spec.add_actuator(
-            name=joint.name, target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT,
-            forcelimited=mujoco.mjtLimited.mjLIMITED_TRUE, forcerange=[-limit, limit],
-            ctrllimited=mujoco.mjtLimited.mjLIMITED_TRUE, ctrlrange=ctrl,
+            name=joint.name,
+            target=joint.name,
+            trntype=mujoco.mjtTrn.mjTRN_JOINT,
+            forcelimited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            forcerange=[-limit, limit],
+            ctrllimited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            ctrlrange=ctrl,
         )
         act.set_to_position(kp=kp, dampratio=1.0)
 

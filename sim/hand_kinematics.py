@@ -161,7 +161,6 @@ def hand_geometry(length_m: float, breadth_m: float) -> HandGeometry:
     )
 
 
-
 # Joint limits (degrees, right hand; sources in `sim.hand`) and torque limits (N m at strength 1:
 # a light-to-moderate grip of 1-3 N per fingertip, below a palm press of 5-25 N, so closing
 # fingers cannot lever the palm off a link — measured; maximal voluntary torques are 10 x higher).
@@ -212,12 +211,23 @@ _FINGERS_FLEXED = {f"{f}_{j}": v for f in FINGERS for j, v in _FLEX_DEG}
 HAND_POSES_DEG: dict[str, dict[str, float]] = {
     "open": {},
     "fist": {
-        **_FINGERS_FLEXED, "palm_arch": 15,
-        "thumb_cmc_flex": 40, "thumb_cmc_abd": 30, "thumb_mcp": 40, "thumb_ip": 40,
+        **_FINGERS_FLEXED,
+        "palm_arch": 15,
+        "thumb_cmc_flex": 40,
+        "thumb_cmc_abd": 30,
+        "thumb_mcp": 40,
+        "thumb_ip": 40,
     },
     "pinch": {  # thumb tip onto the index/middle tips (opposition, Kapandji)
-        "index_mcp_flex": 50, "index_pip": 45, "index_dip": 20,
-        "middle_mcp_flex": 50, "middle_pip": 45, "middle_dip": 20,
-        "thumb_cmc_flex": 30, "thumb_cmc_abd": 40, "thumb_mcp": 5, "thumb_ip": 5,
+        "index_mcp_flex": 50,
+        "index_pip": 45,
+        "index_dip": 20,
+        "middle_mcp_flex": 50,
+        "middle_pip": 45,
+        "middle_dip": 20,
+        "thumb_cmc_flex": 30,
+        "thumb_cmc_abd": 40,
+        "thumb_mcp": 5,
+        "thumb_ip": 5,
     },
 }

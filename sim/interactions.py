@@ -73,8 +73,12 @@ TILT_SD_DEG = 4.0
 TOWARD_SKIN_P = 0.85  # probability that the fingers point towards more skin (not off the end)
 MAX_GRASP_SHIFT_M = 0.05  # largest palm shift from the aim for a grasp, m
 MAX_PEN_FACTOR = 1.6  # max penetration = this x the tissue allowance (the depth saturates at it)
-_PUSH = {"push_away": (1.0, 0.0), "pull": (-1.0, 0.0), "push_left": (0.0, 1.0),
-         "push_right": (0.0, -1.0)}  # hand-frame shear direction (x distal, y operator's left)
+_PUSH = {
+    "push_away": (1.0, 0.0),
+    "pull": (-1.0, 0.0),
+    "push_left": (0.0, 1.0),
+    "push_right": (0.0, -1.0),
+}  # hand-frame shear direction (x distal, y operator's left)
 
 
 def hand_contactor(subject: Subject, rng: np.random.Generator | None = None) -> ContactorSpec:
@@ -99,13 +103,23 @@ def _hand_contactor(subject: Subject) -> ContactorSpec:
     spec.modelname = f"{subject.subject_id}_hand"
     root = spec.worldbody.add_body(name=ROOT)
     spec.attach(hand, frame=root.add_frame(pos=-palm_centre_m(subject)), prefix=HAND_PREFIX)
-    desc = {"type": f"{cfg.side}_hand", "length_m": cfg.length_m, "breadth_m": cfg.breadth_m,
-            "tissue_depth_m": cfg.tissue_depth_m, "subject": subject.subject_id}
+    desc = {
+        "type": f"{cfg.side}_hand",
+        "length_m": cfg.length_m,
+        "breadth_m": cfg.breadth_m,
+        "tissue_depth_m": cfg.tissue_depth_m,
+        "subject": subject.subject_id,
+    }
     if cfg.detail != "full":  # the default hand's description (and dataset bytes) stay as they were
         desc["detail"] = cfg.detail
     return ContactorSpec(
-        spec, labels, "hand", f"{cfg.side}_hand", instance_id=-1,
-        subject_id=int(subject.subject_id.lstrip("s") or -1), description=desc,
+        spec,
+        labels,
+        "hand",
+        f"{cfg.side}_hand",
+        instance_id=-1,
+        subject_id=int(subject.subject_id.lstrip("s") or -1),
+        description=desc,
         max_penetration_m=MAX_PEN_FACTOR * cfg.tissue_depth_m * max(TISSUE_RATIO.values()),
     )
 
@@ -156,17 +170,22 @@ def finger_reach_count(part: Part, taxel: int, yaw_rad: float, length_m: float) 
     d = hand_direction(part, taxel, yaw_rad)
     along = rel @ d
     side = np.linalg.norm(rel - np.outer(along, d), axis=1)
-    return int(np.count_nonzero((along > 0.15 * length_m) & (along < 0.7 * length_m)
-                                & (side < 0.25 * length_m)))
+    return int(
+        np.count_nonzero(
+            (along > 0.15 * length_m) & (along < 0.7 * length_m) & (side < 0.25 * length_m)
+        )
+    )
 
 
-def toward_skin_yaw(part: Part, taxel: int, yaw_rad: float, length_m: float,
-              rng: np.random.Generator) -> float:
+def toward_skin_yaw(
+    part: Part, taxel: int, yaw_rad: float, length_m: float, rng: np.random.Generator
+) -> float:
     """``yaw_rad`` or its opposite: with probability `TOWARD_SKIN_P` the one whose fingers reach
     more skin (an operator grasps where the skin is; the link is grasped from either side)."""
     flip = yaw_rad + np.pi
-    flip_better = (finger_reach_count(part, taxel, flip, length_m)
-                   > finger_reach_count(part, taxel, yaw_rad, length_m))
+    flip_better = finger_reach_count(part, taxel, flip, length_m) > finger_reach_count(
+        part, taxel, yaw_rad, length_m
+    )
     keep_better = rng.random() < TOWARD_SKIN_P
     return float(flip if flip_better == keep_better else yaw_rad)
 
@@ -194,8 +213,10 @@ def plan_hand_interaction(
     (`wrap_shift_m`), or back for fingertips-only touches (`sim.interaction_poses`).
     """
     if action not in ACTIONS or operator_position not in OPERATOR_POSITIONS:
-        raise KeyError(f"unknown action/position {action!r}/{operator_position!r}; known: "
-                       f"{', '.join(ACTIONS)} / {', '.join(OPERATOR_POSITIONS)}")
+        raise KeyError(
+            f"unknown action/position {action!r}/{operator_position!r}; known: "
+            f"{', '.join(ACTIONS)} / {', '.join(OPERATOR_POSITIONS)}"
+        )
     k = draw_aim_taxel(part, rng)
     yaw_deg = nominal_yaw_deg(action, operator_position, rng) + subject.approach_deg
     yaw = float(np.deg2rad(yaw_deg + rng.normal(0.0, YAW_SD_DEG)))
@@ -209,10 +230,15 @@ def plan_hand_interaction(
     tilt = np.deg2rad(rng.normal(0.0, TILT_SD_DEG, 2)) + np.array([0.0, pose.pitch_rad])
     durations = tuple(d * rng.uniform(0.85, 1.15) for d in DURATIONS_S)
     return PressPlan(
-        site_uv=(float(site[0]), float(site[1])), yaw_rad=yaw, tilt_rad=tuple(tilt.tolist()),
-        force_n=float(force), shear_n=(float(shear[0]), float(shear[1])), twist_nm=float(twist),
+        site_uv=(float(site[0]), float(site[1])),
+        yaw_rad=yaw,
+        tilt_rad=tuple(tilt.tolist()),
+        force_n=float(force),
+        shear_n=(float(shear[0]), float(shear[1])),
+        twist_nm=float(twist),
         joint_targets={joint_name(subject, j): v for j, v in pose.targets_rad.items()},
         preshape=tuple(joint_name(subject, j) for j in pose.preshape),
-        durations_s=durations, action=ACTIONS.index(action),
+        durations_s=durations,
+        action=ACTIONS.index(action),
         operator_position=OPERATOR_POSITIONS.index(operator_position),
     )

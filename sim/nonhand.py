@@ -42,8 +42,14 @@ HARD_NEGATIVE_SHARE = 0.30  # of objects, split equally among HARD_NEGATIVES
 BROAD_OBJECTS: tuple[str, ...] = ("cushion", "bundle", "big_ball", "plate", "box")
 BROAD_SHARE = 0.30  # of objects, split equally among BROAD_OBJECTS
 BODY_WEIGHTS: dict[str, float] = {
-    "forearm": 0.20, "upper_arm": 0.15, "elbow": 0.15, "shoulder": 0.15, "chest": 0.10,
-    "back": 0.10, "knee": 0.08, "head": 0.07,
+    "forearm": 0.20,
+    "upper_arm": 0.15,
+    "elbow": 0.15,
+    "shoulder": 0.15,
+    "chest": 0.10,
+    "back": 0.10,
+    "knee": 0.08,
+    "head": 0.07,
 }
 MAX_INSTANCES_PER_KIND = 1000  # global id stride per kind
 OBJECT_ID_BASE, BODY_ID_BASE = 100_000, 500_000  # global instance ids: base + 1000 k + i
@@ -105,8 +111,9 @@ def type_maker(kind: str, name: str, instances_per_kind: int = 20):
 
     def make(rng: np.random.Generator) -> tuple[ContactorSpec, PressPlan]:
         iid = instance_id_for(kind, name, int(rng.integers(instances_per_kind)))
-        build, press = (build_object, object_press) if kind == "object" else (
-            build_body_part, body_press)
+        build, press = (
+            (build_object, object_press) if kind == "object" else (build_body_part, body_press)
+        )
         spec = build(name, rng, iid)
         mode, plan = press(spec, rng)
         return replace(spec, description=spec.description | {"press": mode}), plan
@@ -128,8 +135,14 @@ def write_sheet(path: Path, kind: str, n_per_type: int = 3, seed: int = 0) -> Pa
             images.append(sample["image"])
             titles.append(f"{name} {desc['press']} {float(sample['force_n']):.0f} N")
     what = "objects" if kind == "object" else "body parts"
-    return save_contact_sheet(path, np.stack(images), titles=titles, n_cols=2 * n_per_type,
-                              title=f"simulated {what} pressed on the forearm", tile_in=1.9)
+    return save_contact_sheet(
+        path,
+        np.stack(images),
+        titles=titles,
+        n_cols=2 * n_per_type,
+        title=f"simulated {what} pressed on the forearm",
+        tile_in=1.9,
+    )
 
 
 def main() -> None:

@@ -161,10 +161,15 @@ def _wrench(rng: np.random.Generator) -> Built:
     half_l, half_w, half_t = unif(rng, 0.06, 0.15), unif(rng, 0.006, 0.013), unif(rng, 0.003, 0.005)
     rh = unif(rng, 0.012, 0.02)
     out = [prim("shank", "box", (half_l, half_w, half_t), material="steel")]
-    out += [prim(f"head{i}", "cylinder", (rh, half_t), (s * half_l, 0, 0), material="steel")
-            for i, s in enumerate((-1, 1))]
-    return out, _dims(half_length=half_l, half_width=half_w, half_thickness=half_t,
-                      head_radius=rh), 1.0
+    out += [
+        prim(f"head{i}", "cylinder", (rh, half_t), (s * half_l, 0, 0), material="steel")
+        for i, s in enumerate((-1, 1))
+    ]
+    return (
+        out,
+        _dims(half_length=half_l, half_width=half_w, half_thickness=half_t, head_radius=rh),
+        1.0,
+    )
 
 
 def _finger_rows(rng: np.random.Generator, radii: np.ndarray) -> np.ndarray:
@@ -182,15 +187,23 @@ def _rake(rng: np.random.Generator) -> Built:
     n, r, length = int(rng.integers(3, 7)), unif(rng, *FINGER_RADIUS_M), unif(rng, 0.05, 0.10)
     y, mat = _finger_rows(rng, np.full(n, r)), pick(rng, (*_HARD, "rubber"))
     rb, lift = unif(rng, 0.008, 0.015), (0.0 if rng.random() < 0.5 else unif(rng, 0.005, 0.02))
-    out = [segment(f"tine{i}", "capsule", (0, yi, r), (length, yi, r), r, mat)
-           for i, yi in enumerate(y)]
+    out = [
+        segment(f"tine{i}", "capsule", (0, yi, r), (length, yi, r), r, mat)
+        for i, yi in enumerate(y)
+    ]
     zb = rb + lift
     out.append(segment("bar", "capsule", (-rb, y[0], zb), (-rb, y[-1], zb), rb, mat))
     a, lh = unif(rng, np.pi / 9, 2 * np.pi / 9), unif(rng, 0.15, 0.3)
     end = (-rb - lh * np.cos(a), 0, zb + lh * np.sin(a))
     out.append(segment("handle", "capsule", (-rb, 0, zb + rb), end, 0.012, mat))
-    dims = _dims(n_tines=n, tine_radius=r, tine_length=length, spacing=float(np.diff(y).mean()),
-                 bar_radius=rb, bar_lift=lift)
+    dims = _dims(
+        n_tines=n,
+        tine_radius=r,
+        tine_length=length,
+        spacing=float(np.diff(y).mean()),
+        bar_radius=rb,
+        bar_lift=lift,
+    )
     return out, dims, 1.0
 
 
@@ -199,13 +212,20 @@ def _comb(rng: np.random.Generator) -> Built:
     n, w, length = int(rng.integers(2, 7)), unif(rng, 0.012, 0.022), unif(rng, 0.055, 0.09)
     ht, mat = unif(rng, 0.004, 0.01), pick(rng, ("wood", "hard_plastic", "rubber", "foam"))
     y = _finger_rows(rng, np.full(n, w / 2))
-    out = [prim(f"tooth{i}", "box", (length / 2, w / 2, ht), (length / 2, yi, ht), material=mat)
-           for i, yi in enumerate(y)]
+    out = [
+        prim(f"tooth{i}", "box", (length / 2, w / 2, ht), (length / 2, yi, ht), material=mat)
+        for i, yi in enumerate(y)
+    ]
     hs, lift = unif(rng, 0.01, 0.02), (0.0 if rng.random() < 0.5 else unif(rng, 0.003, 0.01))
     half_y = (y[-1] - y[0] + w) / 2
     out.append(prim("spine", "box", (hs, half_y, ht), (-hs, 0, ht + lift), material=mat))
-    dims = _dims(n_teeth=n, tooth_width=w, tooth_length=length, spacing=float(np.diff(y).mean()),
-                 spine_lift=lift)
+    dims = _dims(
+        n_teeth=n,
+        tooth_width=w,
+        tooth_length=length,
+        spacing=float(np.diff(y).mean()),
+        spine_lift=lift,
+    )
     return out, dims, 1.0
 
 
@@ -217,10 +237,18 @@ def _rod_bundle(rng: np.random.Generator) -> Built:
     lengths, x0 = rng.uniform(0.05, 0.12, n), rng.uniform(-0.02, 0.02, n)
     dz = rng.uniform(0.0, 0.002, n)
     z = radii + dz
-    out = [segment(f"rod{i}", shape, (x0[i], y[i], z[i]), (x0[i] + lengths[i], y[i], z[i]),
-                   radii[i], mat) for i in range(n)]
-    dims = _dims(n_rods=n, radius_mean=radii.mean(), length_mean=lengths.mean(),
-                 spacing=float(np.diff(y).mean()))
+    out = [
+        segment(
+            f"rod{i}", shape, (x0[i], y[i], z[i]), (x0[i] + lengths[i], y[i], z[i]), radii[i], mat
+        )
+        for i in range(n)
+    ]
+    dims = _dims(
+        n_rods=n,
+        radius_mean=radii.mean(),
+        length_mean=lengths.mean(),
+        spacing=float(np.diff(y).mean()),
+    )
     return out, dims | {"shape": shape}, 1.0
 
 
@@ -244,8 +272,10 @@ def _dumbbell(rng: np.random.Generator) -> Built:
     rp, tp = unif(rng, 0.035, 0.08), unif(rng, 0.01, 0.03)
     coat = pick(rng, ("steel", "rubber"))
     out = [segment("handle", "capsule", (-hh, 0, 0), (hh, 0, 0), rh, "steel")]
-    out += [segment(f"weight{i}", "cylinder", (s * hh, 0, 0), (s * (hh + 2 * tp), 0, 0), rp, coat)
-            for i, s in enumerate((-1, 1))]
+    out += [
+        segment(f"weight{i}", "cylinder", (s * hh, 0, 0), (s * (hh + 2 * tp), 0, 0), rp, coat)
+        for i, s in enumerate((-1, 1))
+    ]
     return out, _dims(handle_radius=rh, half_length=hh, weight_radius=rp, weight_half=tp), 1.0
 
 
@@ -269,17 +299,33 @@ def _bundle(rng: np.random.Generator) -> Built:
     n = int(rng.integers(3, 6))
     semi = rng.uniform((0.06, 0.06, 0.04), (0.12, 0.12, 0.07), (n, 3))
     xy, lift = rng.uniform(-0.08, 0.08, (n, 2)), rng.uniform(0.0, 0.02, n)
-    out = [prim(f"lump{i}", "ellipsoid", semi[i], (*xy[i], semi[i, 2] + lift[i]),
-                material="padding") for i in range(n)]
+    out = [
+        prim(f"lump{i}", "ellipsoid", semi[i], (*xy[i], semi[i, 2] + lift[i]), material="padding")
+        for i in range(n)
+    ]
     return out, _dims(n_lumps=n), 1.0
 
 
 BUILDERS = {
-    "ball": _ball, "box": _box, "cylinder_side": _cylinder_side, "cylinder_end": _cylinder_end,
-    "plate": _plate, "plate_edge": _plate_edge, "ruler": _ruler, "mug": _mug,
-    "screwdriver": _screwdriver, "hammer": _hammer, "wrench": _wrench, "rake": _rake,
-    "comb": _comb, "rod_bundle": _rod_bundle, "bottle": _bottle, "dumbbell": _dumbbell,
-    "cushion": _cushion, "big_ball": _big_ball, "bundle": _bundle,
+    "ball": _ball,
+    "box": _box,
+    "cylinder_side": _cylinder_side,
+    "cylinder_end": _cylinder_end,
+    "plate": _plate,
+    "plate_edge": _plate_edge,
+    "ruler": _ruler,
+    "mug": _mug,
+    "screwdriver": _screwdriver,
+    "hammer": _hammer,
+    "wrench": _wrench,
+    "rake": _rake,
+    "comb": _comb,
+    "rod_bundle": _rod_bundle,
+    "bottle": _bottle,
+    "dumbbell": _dumbbell,
+    "cushion": _cushion,
+    "big_ball": _big_ball,
+    "bundle": _bundle,
 }
 HARD_NEGATIVES: tuple[str, ...] = ("rake", "comb", "rod_bundle")
 OBJECT_KINDS: tuple[str, ...] = tuple(BUILDERS)
@@ -301,8 +347,15 @@ def build_object(
         instance_id = int(rng.integers(1000))
     irng = instance_rng(kind, instance_id)
     prims, dims, fill = BUILDERS[kind](irng)
-    return assemble(prims, "object", kind, instance_id, dims=dims,
-                    compliance=draw_compliance(irng, prims), fill=fill)
+    return assemble(
+        prims,
+        "object",
+        kind,
+        instance_id,
+        dims=dims,
+        compliance=draw_compliance(irng, prims),
+        fill=fill,
+    )
 
 
 # --- how objects are pressed -------------------------------------------------------------------

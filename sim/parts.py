@@ -71,6 +71,8 @@ FOREARM_8MM_TILING = Tiling(
         ".XXX...XXXX..X..",
     ),
 )
+
+
 def finer_forearm_tiling(n_rows: int) -> Tiling:
     """The forearm's lattice redrawn with smaller modules: `n_rows` rows instead of 5.
 
@@ -103,7 +105,6 @@ def finer_forearm_tiling(n_rows: int) -> Tiling:
     grid = bare.reshape(n_rows, n_cols)
     keep = tuple("".join("." if b else "X" for b in r) for r in grid[::-1])
     return Tiling(n_rows, n_cols, col, row, pitch, keep=keep)
-
 
 
 FOREARM_REGION = TubeRegion((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), center_m=0.16)

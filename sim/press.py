@@ -84,8 +84,11 @@ def _add_root(spec: mujoco.MjSpec, tilt_kp: float = TILT_KP) -> None:
         root.add_joint(name=f"press_{name}", type=kind, axis=axis, armature=0 if slide else 1e-3)
         kp = SLIDE_KP if slide else (YAW_KP if name == "yaw" else tilt_kp)
         act = spec.add_actuator(
-            name=f"press_{name}", target=f"press_{name}", trntype=mujoco.mjtTrn.mjTRN_JOINT,
-            forcelimited=mujoco.mjtLimited.mjLIMITED_TRUE, forcerange=[-1.0, 1.0],
+            name=f"press_{name}",
+            target=f"press_{name}",
+            trntype=mujoco.mjtTrn.mjTRN_JOINT,
+            forcelimited=mujoco.mjtLimited.mjLIMITED_TRUE,
+            forcerange=[-1.0, 1.0],
         )
         act.set_to_position(kp=kp, dampratio=1.0)
 
@@ -117,13 +120,18 @@ def build_press_scene(
         model, f"{PART_PREFIX}tactile", f"{PART_PREFIX}skin", [PREFIX + n for n in names]
     )
     act = {model.actuator(i).name: i for i in range(model.nu)}
-    joint_act = {n[len(PREFIX):]: i for n, i in act.items() if n.startswith(PREFIX)}
+    joint_act = {n[len(PREFIX) :]: i for n, i in act.items() if n.startswith(PREFIX)}
     root_act = np.array([act[f"press_{n}"] for n in ROOT_JOINTS])
     qadr = [model.jnt_qposadr[model.joint(f"press_{n}").id] for n in ROOT_JOINTS]
     return PressScene(
-        model, mujoco.MjData(model), readout,
-        np.array([contactor.geom_labels[n] for n in names], dtype=np.int64), root_act,
-        np.asarray(qadr), joint_act, model.body("press").id,
+        model,
+        mujoco.MjData(model),
+        readout,
+        np.array([contactor.geom_labels[n] for n in names], dtype=np.int64),
+        root_act,
+        np.asarray(qadr),
+        joint_act,
+        model.body("press").id,
         HAND_TILT_LIMIT_NM if contactor.kind == "hand" else TILT_LIMIT_NM,
     )
 
@@ -145,11 +153,15 @@ def root_schedule(plan: PressPlan, times_s: np.ndarray) -> tuple[np.ndarray, np.
     hold = _ramp(t, lo, lo + 0.5 * plan.durations_s[2]) * (t < h)
     z = APPROACH_HEIGHT_M * (1.0 - _ramp(t, 0.0, a) + _ramp(t, h, plan.total_s))
     shear, twist = np.asarray(plan.shear_n, dtype=float), plan.twist_nm
-    target = np.column_stack([
-        SHEAR_TRAVEL_M * np.sign(shear[0]) * hold, SHEAR_TRAVEL_M * np.sign(shear[1]) * hold,
-        z - PRESS_DEPTH_M * sink, plan.yaw_rad + TWIST_TRAVEL_RAD * np.sign(twist) * hold,
-        np.broadcast_to(plan.tilt_rad, (t.size, 2)),
-    ])
+    target = np.column_stack(
+        [
+            SHEAR_TRAVEL_M * np.sign(shear[0]) * hold,
+            SHEAR_TRAVEL_M * np.sign(shear[1]) * hold,
+            z - PRESS_DEPTH_M * sink,
+            plan.yaw_rad + TWIST_TRAVEL_RAD * np.sign(twist) * hold,
+            np.broadcast_to(plan.tilt_rad, (t.size, 2)),
+        ]
+    )
     holding = hold[:, None] > 0
     lim_xy = np.where(holding & (shear != 0), np.abs(shear), HOLD_FORCE_N)
     lim_yaw = np.where(holding[:, 0] & (twist != 0), abs(twist), YAW_HOLD_NM)

@@ -84,10 +84,12 @@ def build_state(cfg: GenerateConfig, ctx: EpisodeContext | None = None) -> Worke
     subjects = subject_pool(cfg)
     k = cfg.instances_per_kind
     return WorkerState(
-        cfg, ctx, subjects,
+        cfg,
+        ctx,
+        subjects,
         hand=scaled(hand_maker(subjects, ctx), cfg.duration_scale),
         nonhand=scaled(lambda rng: sample_nonhand(rng, k), cfg.duration_scale),
-    )  # fmt: skip
+    )
 
 
 def init_worker(cfg: GenerateConfig, ctx: EpisodeContext | None = None) -> None:
@@ -101,8 +103,9 @@ def pad_sequence(sample: Sample, frames: int) -> Sample:
     """``seq_raw`` (F, N) zero-padded to (frames, N); ConfigError when F > frames."""
     seq = sample["seq_raw"]
     if len(seq) > frames:
-        raise ConfigError(f"an episode has {len(seq)} frames > sequence_frames = {frames}; "
-                          "raise sequence_frames")
+        raise ConfigError(
+            f"an episode has {len(seq)} frames > sequence_frames = {frames}; raise sequence_frames"
+        )
     out = np.zeros((frames, seq.shape[1]), dtype=seq.dtype)
     out[: len(seq)] = seq
     return sample | {"seq_raw": out}

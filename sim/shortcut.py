@@ -22,7 +22,11 @@ from sklearn.preprocessing import StandardScaler
 from tactile.errors import DataError
 
 FEATURE_NAMES: tuple[str, ...] = (
-    "area_px", "n_blobs", "mean_intensity", "bbox_height_px", "bbox_width_px",
+    "area_px",
+    "n_blobs",
+    "mean_intensity",
+    "bbox_height_px",
+    "bbox_width_px",
 )
 NONHAND_GROUP_OFFSET = 1 << 40  # keeps non-hand instance ids apart from subject ids
 
@@ -56,9 +60,10 @@ def image_features(images: np.ndarray) -> np.ndarray:
     images = np.asarray(images)
     if images.ndim != 3:
         raise DataError(f"images must be a (B, H, W) stack, got shape {images.shape}")
-    return np.array([
-        [contact_area_px(im), blob_count(im), mean_intensity(im), *bbox_px(im)] for im in images
-    ], dtype=np.float64)
+    return np.array(
+        [[contact_area_px(im), blob_count(im), mean_intensity(im), *bbox_px(im)] for im in images],
+        dtype=np.float64,
+    )
 
 
 def group_ids(is_hand: np.ndarray, subject_id: np.ndarray, instance_id: np.ndarray) -> np.ndarray:
@@ -68,8 +73,11 @@ def group_ids(is_hand: np.ndarray, subject_id: np.ndarray, instance_id: np.ndarr
     return np.where(hand, np.asarray(subject_id, dtype=np.int64), inst)
 
 
-def split_by_group(groups: np.ndarray, test_fraction: float = 0.3, seed: int = 0,
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def split_by_group(
+    groups: np.ndarray,
+    test_fraction: float = 0.3,
+    seed: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
     """(train, test) sample indices (int64) with no group in both; ~``test_fraction`` of the
     groups held out."""
     split = GroupShuffleSplit(n_splits=1, test_size=test_fraction, random_state=seed)
@@ -89,8 +97,12 @@ class ShortcutResult:
 
 
 def shortcut_check(
-    features: np.ndarray, is_hand: np.ndarray, groups: np.ndarray, *,
-    test_fraction: float = 0.3, seed: int = 0,
+    features: np.ndarray,
+    is_hand: np.ndarray,
+    groups: np.ndarray,
+    *,
+    test_fraction: float = 0.3,
+    seed: int = 0,
 ) -> ShortcutResult:
     """Logistic regression on ``features`` (S, F) -> ``is_hand`` (S,), held out by ``groups`` (S,)
     (no subject or instance in both train and test). Features standardised on the train part."""

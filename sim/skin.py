@@ -197,7 +197,10 @@ class SkinInstance:
 
     @classmethod
     def create(
-        cls, positions_m: np.ndarray, cfg: SkinConfig, rng: np.random.Generator,
+        cls,
+        positions_m: np.ndarray,
+        cfg: SkinConfig,
+        rng: np.random.Generator,
         faces: np.ndarray | None = None,
     ) -> SkinInstance:
         """Draw the per-taxel gain, baseline and drift rate for taxels at positions_m (N, 3), m;
@@ -232,15 +235,22 @@ class SkinInstance:
     def readout(self) -> Readout:
         """How the robot reads this skin: known baseline and drift removed, signals at or below
         `NOISE_FLOOR_SIGMAS` noise sd read 0, over the nominal gain (gains unknown to it)."""
-        return Readout(self.cfg.counts_per_pa, self.baseline_counts, self.drift_counts_per_s,
-                       NOISE_FLOOR_SIGMAS * self.cfg.noise_std_counts)  # fmt: skip
+        return Readout(
+            self.cfg.counts_per_pa,
+            self.baseline_counts,
+            self.drift_counts_per_s,
+            NOISE_FLOOR_SIGMAS * self.cfg.noise_std_counts,
+        )
 
     def offset(self, time_s: float) -> np.ndarray:
         """Untouched reading (N,) counts at time_s: baseline plus linear drift."""
         return self.baseline_counts + self.drift_counts_per_s * time_s
 
     def frame(
-        self, depth_m: np.ndarray, rng: np.random.Generator | None, time_s: float = 0.0,
+        self,
+        depth_m: np.ndarray,
+        rng: np.random.Generator | None,
+        time_s: float = 0.0,
         force_n: float | None = None,
     ) -> SkinFrame:
         """Depth (N,) m -> `SkinFrame`. rng=None gives the noise-free reading; ``force_n``: the

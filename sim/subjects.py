@@ -55,7 +55,7 @@ class Subject:
 
     @property
     def handedness(self) -> str:
-        """"right" or "left": the side of the dominant hand used in the interactions."""
+        """ "right" or "left": the side of the dominant hand used in the interactions."""
         return self.hand.side
 
     @property
@@ -103,11 +103,15 @@ def sample_subjects(n: int, rng: np.random.Generator, *, first_id: int = 0) -> l
         Subject(
             subject_id=f"s{first_id + i:04d}",
             hand=HandConfig(
-                length_m=float(length[i]), breadth_m=float(length[i] * ratio[i]),
-                side="right" if right[i] else "left", tissue_depth_m=float(tissue[i]),
+                length_m=float(length[i]),
+                breadth_m=float(length[i] * ratio[i]),
+                side="right" if right[i] else "left",
+                tissue_depth_m=float(tissue[i]),
             ),
-            force_scale=float(force[i]), approach_deg=float(approach[i]),
-            pose_noise_deg=float(noise[i]), finger_spread_deg=float(spread[i]),
+            force_scale=float(force[i]),
+            approach_deg=float(approach[i]),
+            pose_noise_deg=float(noise[i]),
+            finger_spread_deg=float(spread[i]),
         )
         for i in range(n)
     ]

@@ -41,9 +41,16 @@ TINY_MAX_ATTEMPTS = 20
 
 def tiny_config(n: int = 8, seed: int = 0) -> GenerateConfig:
     """The `tiny` preset: plate part, 4 subjects, 2 instances per object kind, short presses."""
-    return GenerateConfig(part=TINY_PART, n=n, seed=seed, n_subjects=4, instances_per_kind=2,
-                          duration_scale=TINY_DURATION_SCALE, chunk_size=max(1, min(n, 4096)),
-                          episode=EpisodeConfig(max_attempts=TINY_MAX_ATTEMPTS))
+    return GenerateConfig(
+        part=TINY_PART,
+        n=n,
+        seed=seed,
+        n_subjects=4,
+        instances_per_kind=2,
+        duration_scale=TINY_DURATION_SCALE,
+        chunk_size=max(1, min(n, 4096)),
+        episode=EpisodeConfig(max_attempts=TINY_MAX_ATTEMPTS),
+    )
 
 
 @lru_cache(maxsize=4)

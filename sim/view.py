@@ -36,9 +36,17 @@ SKIN_RGB = (0.93, 0.76, 0.65)  # hand / body tissue colour
 OBJECT_RGB = (0.85, 0.55, 0.25)
 IDLE_RGB = "#c9d8ee"  # sensor mesh where nothing is felt
 LINK_RGB = "#d9d9de"
-SCALAR_BAR = {"title": "kPa", "vertical": True, "below_label": "idle", "fmt": "%.0f",
-              "color": "black", "position_x": 0.87, "position_y": 0.15, "height": 0.6,
-              "width": 0.06}
+SCALAR_BAR = {
+    "title": "kPa",
+    "vertical": True,
+    "below_label": "idle",
+    "fmt": "%.0f",
+    "color": "black",
+    "position_x": 0.87,
+    "position_y": 0.15,
+    "height": 0.6,
+    "width": 0.06,
+}
 
 
 @dataclass(frozen=True)
@@ -80,13 +88,21 @@ def contactor_geoms(
     for name, label in sorted(geom_labels.items()):
         g = model.geom(press.PREFIX + name).id
         kind = mujoco.mjtGeom(model.geom_type[g]).name.removeprefix("mjGEOM_").lower()
-        shapes.append(GeomShape(kind, model.geom_size[g].copy(), data.geom_xpos[g].copy(),
-                                data.geom_xmat[g].reshape(3, 3).copy(), int(label)))
+        shapes.append(
+            GeomShape(
+                kind,
+                model.geom_size[g].copy(),
+                data.geom_xpos[g].copy(),
+                data.geom_xmat[g].reshape(3, 3).copy(),
+                int(label),
+            )
+        )
     return tuple(shapes)
 
 
-def replay_geoms(ctx: EpisodeContext, contactor, plan, rng: np.random.Generator,
-                 frame_index: int) -> tuple[tuple[GeomShape, ...], np.ndarray]:
+def replay_geoms(
+    ctx: EpisodeContext, contactor, plan, rng: np.random.Generator, frame_index: int
+) -> tuple[tuple[GeomShape, ...], np.ndarray]:
     """Re-run an episode as `sim.episode.run_episode` does (same rng state after ``make``) up to
     frame ``frame_index`` (0-based, 10 Hz) and return (contactor geoms, pressure (N,) Pa there).
 
@@ -134,9 +150,14 @@ def simulate_scene(cfg: GenerateConfig, index: int) -> Simulated:
     geoms, pressure = replay_geoms(state.ctx, contactor, plan, rng, frame_index)
     if np.abs(pressure - sample["pressure_pa"]).max() > 1.0:
         raise RuntimeError(f"replay of sample {index} (seed {cfg.seed}) differs from the run")
-    scene = ViewScene(state.ctx.part, sample["pressure_pa"].astype(np.float64),
-                      sample["taxel_label"].astype(np.int64), geoms, contactor.kind,
-                      caption(sample, index))
+    scene = ViewScene(
+        state.ctx.part,
+        sample["pressure_pa"].astype(np.float64),
+        sample["taxel_label"].astype(np.int64),
+        geoms,
+        contactor.kind,
+        caption(sample, index),
+    )
     return Simulated(scene, sample, state.ctx)
 
 
@@ -146,8 +167,12 @@ def sequence_pressure(ctx: EpisodeContext, seq_raw: np.ndarray, length: int) -> 
     removed; frames at 10 Hz)."""
     from sim.episode_frames import sensed_pressure
 
-    return np.stack([sensed_pressure(ctx.skin, raw, (k + 1) * FRAME_DT_S)
-                     for k, raw in enumerate(seq_raw[:length])])
+    return np.stack(
+        [
+            sensed_pressure(ctx.skin, raw, (k + 1) * FRAME_DT_S)
+            for k, raw in enumerate(seq_raw[:length])
+        ]
+    )
 
 
 def caption(sample: dict, index: int) -> str:
@@ -171,8 +196,7 @@ def geom_mesh(g: GeomShape):
     if g.kind == "sphere":
         mesh = pv.Sphere(radius=s[0], theta_resolution=24, phi_resolution=16)
     elif g.kind == "capsule":
-        mesh = pv.Capsule(radius=s[0], cylinder_length=2 * s[1], direction=(0, 0, 1),
-                          resolution=24)
+        mesh = pv.Capsule(radius=s[0], cylinder_length=2 * s[1], direction=(0, 0, 1), resolution=24)
     elif g.kind == "cylinder":
         mesh = pv.Cylinder(radius=s[0], height=2 * s[1], direction=(0, 0, 1), resolution=32)
     elif g.kind == "box":
@@ -180,8 +204,9 @@ def geom_mesh(g: GeomShape):
     elif g.kind == "ellipsoid":
         mesh = pv.ParametricEllipsoid(*s)
     else:
-        raise ValueError(f"cannot draw geom type {g.kind!r}; known: sphere capsule cylinder box "
-                         "ellipsoid")
+        raise ValueError(
+            f"cannot draw geom type {g.kind!r}; known: sphere capsule cylinder box ellipsoid"
+        )
     transform = np.eye(4)
     transform[:3, :3], transform[:3, 3] = g.rot, g.pos_m
     return mesh.triangulate().transform(transform, inplace=False)
@@ -201,17 +226,25 @@ def _poly(vertices: np.ndarray, faces: np.ndarray):
     return pv.PolyData(vertices, np.column_stack([np.full(len(faces), 3), faces]).ravel())
 
 
-def _add_skin(plotter, scene: ViewScene, color: str, labels: np.ndarray, active_pa: float,
-              bar: bool) -> None:
+def _add_skin(
+    plotter, scene: ViewScene, color: str, labels: np.ndarray, active_pa: float, bar: bool
+) -> None:
     layout = scene.part.layout
     lifted = layout.positions_m + 1.5e-3 * layout.normals
     skin = _poly(lifted, scene.part.sensor_faces)
     if color == "pressure":
         skin["pressure (kPa)"] = scene.pressure_pa / 1e3
         top = max(float(scene.pressure_pa.max()) / 1e3, 2 * active_pa / 1e3)
-        plotter.add_mesh(skin, scalars="pressure (kPa)", cmap="inferno_r",
-                         clim=(active_pa / 1e3, top), below_color=IDLE_RGB, smooth_shading=True,
-                         show_scalar_bar=bar, scalar_bar_args=SCALAR_BAR)
+        plotter.add_mesh(
+            skin,
+            scalars="pressure (kPa)",
+            cmap="inferno_r",
+            clim=(active_pa / 1e3, top),
+            below_color=IDLE_RGB,
+            smooth_shading=True,
+            show_scalar_bar=bar,
+            scalar_bar_args=SCALAR_BAR,
+        )
     else:
         skin["rgb"] = taxel_rgb(labels)
         plotter.add_mesh(skin, scalars="rgb", rgb=True, smooth_shading=True)
@@ -222,8 +255,9 @@ def _add_contactor(plotter, scene: ViewScene, by_label: bool) -> None:
     opacity = 0.6 if scene.kind == "body" else 1.0  # a back or thigh would hide the whole arm
     for g in scene.geoms:
         rgb = PALETTE[g.label] / 255.0 if by_label and g.label > 0 else base
-        plotter.add_mesh(geom_mesh(g), color=rgb, opacity=opacity, smooth_shading=True,
-                         specular=0.2)
+        plotter.add_mesh(
+            geom_mesh(g), color=rgb, opacity=opacity, smooth_shading=True, specular=0.2
+        )
 
 
 def camera_direction(scene: ViewScene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -266,14 +300,19 @@ def render_scene(
     if color == "prediction" and predicted is None:
         raise ValueError("color='prediction' needs the predicted per-taxel labels")
     labels = predicted if color == "prediction" else scene.labels
-    plotter = pv.Plotter(off_screen=not interactive, window_size=list(size_px),
-                         shape=(1, len(panels)), border=False)
+    plotter = pv.Plotter(
+        off_screen=not interactive, window_size=list(size_px), shape=(1, len(panels)), border=False
+    )
     focus, view, up = camera_direction(scene)
     for i, panel in enumerate(panels):
         plotter.subplot(0, i)
         plotter.set_background("white")
-        plotter.add_mesh(_poly(scene.part.link.vertices, scene.part.link.faces), color=LINK_RGB,
-                         smooth_shading=True, ambient=0.3)
+        plotter.add_mesh(
+            _poly(scene.part.link.vertices, scene.part.link.faces),
+            color=LINK_RGB,
+            smooth_shading=True,
+            ambient=0.3,
+        )
         _add_skin(plotter, scene, color, np.asarray(labels), active_pa, bar=panel == "skin")
         if panel == "contact":
             _add_contactor(plotter, scene, color != "pressure")
@@ -282,7 +321,10 @@ def render_scene(
         plotter.camera_position = [tuple(focus + distance * unit), tuple(focus), tuple(up)]
         text = scene.title if panel == "contact" else f"skin: {color}"
         plotter.add_text(text, font_size=9, color="black")
-    image = plotter.show(screenshot=True, return_img=True) if interactive else \
-        plotter.screenshot(return_img=True)
+    image = (
+        plotter.show(screenshot=True, return_img=True)
+        if interactive
+        else plotter.screenshot(return_img=True)
+    )
     plotter.close()
     return np.asarray(image)[..., :3]

@@ -37,8 +37,10 @@ def load_predicted(path: Path, tmap, n_taxels: int) -> tuple[np.ndarray, np.ndar
 
     path = Path(path)
     if not path.is_file():
-        raise DataError(f"no predicted labels at {path}. Fix: write them with handskin predict "
-                        "--data DATASET --index I --segmenter CKPT --save-labels FILE.npy")
+        raise DataError(
+            f"no predicted labels at {path}. Fix: write them with handskin predict "
+            "--data DATASET --index I --segmenter CKPT --save-labels FILE.npy"
+        )
     try:
         arr = np.load(path, allow_pickle=False)
     except (OSError, ValueError) as err:
@@ -47,8 +49,10 @@ def load_predicted(path: Path, tmap, n_taxels: int) -> tuple[np.ndarray, np.ndar
         return backproject(tmap, arr.astype(np.int64)).astype(np.int64), arr.astype(np.int64)
     if arr.shape == (n_taxels,):
         return check_labels(arr.astype(np.int64), n_taxels), None
-    raise DataError(f"{path}: shape {arr.shape}; expected ({n_taxels},) taxel labels or "
-                    f"{tmap.shape} pixel classes")
+    raise DataError(
+        f"{path}: shape {arr.shape}; expected ({n_taxels},) taxel labels or "
+        f"{tmap.shape} pixel classes"
+    )
 
 
 def from_dataset(path: Path, index: int):
@@ -108,24 +112,45 @@ def write_outputs(scene, tmap, sample, seq, opts: dict) -> list[Path]:
     out, view = [], None
     predicted = opts["predicted"]
     if scene is not None and (opts["png"] or opts["panel"] or opts["interactive"]):
-        view = render_scene(scene, opts["color"], predicted, size_px=opts["size_px"],
-                            interactive=opts["interactive"])
+        view = render_scene(
+            scene,
+            opts["color"],
+            predicted,
+            size_px=opts["size_px"],
+            interactive=opts["interactive"],
+        )
     if opts["png"] and view is None:
-        raise DataError("no 3D scene for this sample: the dataset is not a synthetic one whose "
-                        "configuration can be re-simulated. Fix: write --panel or "
-                        "--prediction-png instead of --png")
+        raise DataError(
+            "no 3D scene for this sample: the dataset is not a synthetic one whose "
+            "configuration can be re-simulated. Fix: write --panel or "
+            "--prediction-png instead of --png"
+        )
     if opts["png"]:
         opts["png"].parent.mkdir(parents=True, exist_ok=True)
         Image.fromarray(view).save(opts["png"])
         out.append(opts["png"])
     if opts["panel"]:
         title = scene.title if scene is not None else ""
-        fig = sample_panel(view, tmap, sample["image"], sample.get("label_image"),
-                           np.asarray(sample["pressure_pa"], dtype=float), title)
+        fig = sample_panel(
+            view,
+            tmap,
+            sample["image"],
+            sample.get("label_image"),
+            np.asarray(sample["pressure_pa"], dtype=float),
+            title,
+        )
         out.append(save_figure(fig, opts["panel"], dpi=90))
     if opts["prediction_png"]:
-        out.extend(prediction_outputs(tmap, sample, predicted, opts["pred_pixels"],
-                                      opts["prediction_png"], opts["pred_name"]))
+        out.extend(
+            prediction_outputs(
+                tmap,
+                sample,
+                predicted,
+                opts["pred_pixels"],
+                opts["prediction_png"],
+                opts["pred_name"],
+            )
+        )
     if opts["sequence"]:
         if seq is None:
             raise DataError("no 10 Hz sequence for this sample: the dataset has no seq_raw")
@@ -136,60 +161,106 @@ def write_outputs(scene, tmap, sample, seq, opts: dict) -> list[Path]:
     return out
 
 
-def prediction_outputs(tmap, sample: dict, predicted, pred_pixels, png: Path,
-                       name: str = "predicted") -> list[Path]:
+def prediction_outputs(
+    tmap, sample: dict, predicted, pred_pixels, png: Path, name: str = "predicted"
+) -> list[Path]:
     """Figs. 12-13 (image, true, predicted, errors) at ``png`` and Fig. 18's per-part bars
     (true vs predicted taxel labels) beside it (``<stem>_parts.png``)."""
     from tactile.figures import part_bars_figure, prediction_figure, save_figure
 
     if pred_pixels is None:
-        raise DataError("--prediction-png needs --pred as an (H, W) pixel segmentation; for "
-                        "(N,) taxel labels, handskin predict --png draws these figures")
+        raise DataError(
+            "--prediction-png needs --pred as an (H, W) pixel segmentation; for "
+            "(N,) taxel labels, handskin predict --png draws these figures"
+        )
     pressure = np.asarray(sample["pressure_pa"], dtype=float)
     fig = prediction_figure(sample["image"], sample["label_image"], pred_pixels, pred_name=name)
-    bars = part_bars_figure(sample["taxel_label"], pressure, pred_labels=predicted,
-                            threshold_pa=0.0, title=f"hatched: {name}")
-    return [save_figure(fig, png, dpi=90),
-            save_figure(bars, png.with_name(f"{png.stem}_parts.png"), dpi=90)]
+    bars = part_bars_figure(
+        sample["taxel_label"],
+        pressure,
+        pred_labels=predicted,
+        threshold_pa=0.0,
+        title=f"hatched: {name}",
+    )
+    return [
+        save_figure(fig, png, dpi=90),
+        save_figure(bars, png.with_name(f"{png.stem}_parts.png"), dpi=90),
+    ]
 
 
 def view_command(
-    dataset: Annotated[Path | None, typer.Argument(
-        help="Dataset folder (or its dataset.h5); omit to simulate a sample with --seed/--index."
-    )] = None,
+    dataset: Annotated[
+        Path | None,
+        typer.Argument(
+            help="Dataset folder (or its dataset.h5); omit to simulate a sample with "
+            "--seed/--index."
+        ),
+    ] = None,
     sample: Annotated[int, typer.Option(help="Sample index in DATASET (count, 0-based).")] = 0,
-    part: Annotated[str, typer.Option(
-        help="Built-in part for a simulated sample (name: forearm, forearm_8mm, forearm_x2, "
-        "forearm_x4, end_effector, plate; no unit).")] = "forearm",
+    part: Annotated[
+        str,
+        typer.Option(
+            help="Built-in part for a simulated sample (name: forearm, forearm_8mm, forearm_x2, "
+            "forearm_x4, end_effector, plate; no unit)."
+        ),
+    ] = "forearm",
     seed: Annotated[int, typer.Option(help="Dataset seed of the simulated sample (integer).")] = 0,
-    index: Annotated[int, typer.Option(
-        help="Index of the simulated sample (count, 0-based; samples 2, 4, 6, ... are hands "
-        "with the default hand fraction).")] = 2,
-    color: Annotated[str, typer.Option(
-        help="Taxel colours: pressure (kPa colour bar), label (class palette) or prediction "
-        "(classes read from --pred); no unit.")] = "pressure",
-    pred: Annotated[Path | None, typer.Option(
-        help="Predicted classes for --color prediction: .npy of (N,) taxel class ids or an "
-        "(H, W) pixel segmentation (class ids 0..6, no unit).")] = None,
-    png: Annotated[Path | None, typer.Option(
-        help="Write the 3D view (PNG, --width x --height pixels).")] = None,
-    panel: Annotated[Path | None, typer.Option(
-        help="Write the Fig. 1 panel: 3D view, map (mm), tactile image, labels (PNG, 90 dpi).")
+    index: Annotated[
+        int,
+        typer.Option(
+            help="Index of the simulated sample (count, 0-based; samples 2, 4, 6, ... are hands "
+            "with the default hand fraction)."
+        ),
+    ] = 2,
+    color: Annotated[
+        str,
+        typer.Option(
+            help="Taxel colours: pressure (kPa colour bar), label (class palette) or prediction "
+            "(classes read from --pred); no unit."
+        ),
+    ] = "pressure",
+    pred: Annotated[
+        Path | None,
+        typer.Option(
+            help="Predicted classes for --color prediction: .npy of (N,) taxel class ids or an "
+            "(H, W) pixel segmentation (class ids 0..6, no unit)."
+        ),
     ] = None,
-    sequence: Annotated[Path | None, typer.Option(
-        help="Write the 10 Hz frames on one intensity scale: .gif animation (real time, 2 px "
-        "per mm) or .png strip.")
+    png: Annotated[
+        Path | None, typer.Option(help="Write the 3D view (PNG, --width x --height pixels).")
     ] = None,
-    pred_name: Annotated[str, typer.Option(
-        help="Caption of the predicted labels in the figures (text, no unit), e.g. a model name "
-        "or 'ablated ground truth'.")] = "predicted",
-    prediction_png: Annotated[Path | None, typer.Option(
-        help="With --pred (H, W): write image / true / predicted / errors in red (PNG, 90 dpi) "
-        "and the per-part mean pressure (kPa) and taxel count bars beside it.")] = None,
+    panel: Annotated[
+        Path | None,
+        typer.Option(
+            help="Write the Fig. 1 panel: 3D view, map (mm), tactile image, labels (PNG, 90 dpi)."
+        ),
+    ] = None,
+    sequence: Annotated[
+        Path | None,
+        typer.Option(
+            help="Write the 10 Hz frames on one intensity scale: .gif animation (real time, 2 px "
+            "per mm) or .png strip."
+        ),
+    ] = None,
+    pred_name: Annotated[
+        str,
+        typer.Option(
+            help="Caption of the predicted labels in the figures (text, no unit), e.g. a model "
+            "name or 'ablated ground truth'."
+        ),
+    ] = "predicted",
+    prediction_png: Annotated[
+        Path | None,
+        typer.Option(
+            help="With --pred (H, W): write image / true / predicted / errors in red (PNG, 90 dpi) "
+            "and the per-part mean pressure (kPa) and taxel count bars beside it."
+        ),
+    ] = None,
     width: Annotated[int, typer.Option(help="3D view width, pixels.")] = 1200,
     height: Annotated[int, typer.Option(help="3D view height, pixels.")] = 520,
-    interactive: Annotated[bool, typer.Option(
-        help="Open an interactive 3D window (needs a display; no unit).")] = False,
+    interactive: Annotated[
+        bool, typer.Option(help="Open an interactive 3D window (needs a display; no unit).")
+    ] = False,
 ) -> None:
     """Draw one sample: 3D view (part, taxels, contactor in place), Fig. 1 panel, sequence."""
     try:
@@ -205,12 +276,19 @@ def view_command(
             scene, tmap, smp, seq = from_dataset(dataset, sample)
         else:
             scene, tmap, smp, seq = simulated(part, seed, index, sequence is not None)
-        predicted, pred_pixels = load_predicted(pred, tmap, tmap.n_taxels) if pred else (None,
-                                                                                         None)
-        opts = {"png": png, "panel": panel, "sequence": sequence, "color": color,
-                "predicted": predicted, "pred_pixels": pred_pixels, "size_px": (width, height),
-                "interactive": interactive, "prediction_png": prediction_png,
-                "pred_name": pred_name}
+        predicted, pred_pixels = load_predicted(pred, tmap, tmap.n_taxels) if pred else (None, None)
+        opts = {
+            "png": png,
+            "panel": panel,
+            "sequence": sequence,
+            "color": color,
+            "predicted": predicted,
+            "pred_pixels": pred_pixels,
+            "size_px": (width, height),
+            "interactive": interactive,
+            "prediction_png": prediction_png,
+            "pred_name": pred_name,
+        }
         written = write_outputs(scene, tmap, smp, seq, opts)
     except (HandskinError, KeyError, ValueError) as err:
         raise _fail(err) from err

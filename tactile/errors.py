@@ -29,8 +29,9 @@ class DataError(HandskinError, ValueError):
     """A dataset or recording on disk is malformed, incompatible or from another configuration."""
 
 
-def require_folder(path: Path, what: str = "--out",
-                   fix: str = "give a folder path (created if missing)") -> None:  # fmt: skip
+def require_folder(
+    path: Path, what: str = "--out", fix: str = "give a folder path (created if missing)"
+) -> None:
     """Refuse an output folder that is, or lies under, an existing file (ConfigError naming the
     file and ``fix``), before any work starts."""
     for p in (path, *path.parents):

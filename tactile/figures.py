@@ -69,8 +69,9 @@ def palette_legend(fig: Figure, ncols: int = 6) -> None:
 def draw_map_pressure(ax: Axes, tmap: TactileMap, pressure_pa: np.ndarray | None = None) -> None:
     """The flat map's triangles (grey edges) and taxels (grey dots), the pressed ones (p > 0)
     coloured by pressure when given. pressure_pa : (N,) float, Pa (kPa on the colour bar)."""
-    tris = PolyCollection(tmap.vertex_uv_mm[tmap.faces], facecolors="0.95", edgecolors="0.65",
-                          linewidths=0.3)
+    tris = PolyCollection(
+        tmap.vertex_uv_mm[tmap.faces], facecolors="0.95", edgecolors="0.65", linewidths=0.3
+    )
     ax.add_collection(tris)
     placed = np.isfinite(tmap.uv[:, 0])
     ax.plot(*tmap.uv[placed].T, ".", ms=1.5, color="0.45")
@@ -78,8 +79,15 @@ def draw_map_pressure(ax: Axes, tmap: TactileMap, pressure_pa: np.ndarray | None
         kpa = np.where(placed, np.asarray(pressure_pa, dtype=float), 0.0) / 1e3
         on = np.flatnonzero(kpa > 0)
         on = on[np.argsort(kpa[on])]  # the most pressed on top
-        dots = ax.scatter(*tmap.uv[on].T, c=kpa[on], s=10, cmap="inferno_r", vmin=0,
-                          vmax=max(float(kpa.max()), 1e-3), linewidths=0)
+        dots = ax.scatter(
+            *tmap.uv[on].T,
+            c=kpa[on],
+            s=10,
+            cmap="inferno_r",
+            vmin=0,
+            vmax=max(float(kpa.max()), 1e-3),
+            linewidths=0,
+        )
         ax.figure.colorbar(dots, ax=ax, fraction=0.035, pad=0.02, label="pressure (kPa)")
     ax.set_aspect("equal")
     ax.autoscale_view()
@@ -116,8 +124,9 @@ def sample_panel(
     row_in = 13.0 / n * h / w + 0.9
     view_in = 0.0 if view_rgb is None else 13.0 * view_rgb.shape[0] / view_rgb.shape[1]
     fig = Figure(figsize=(13.0, view_in + row_in + 0.6), layout="constrained")
-    grid = fig.add_gridspec(1 + (view_rgb is not None), n, height_ratios=[
-        r for r in (view_in, row_in) if r > 0])
+    grid = fig.add_gridspec(
+        1 + (view_rgb is not None), n, height_ratios=[r for r in (view_in, row_in) if r > 0]
+    )
     if view_rgb is not None:
         _show(fig.add_subplot(grid[0, :]), np.asarray(view_rgb), "")
     axes = [fig.add_subplot(grid[-1, k]) for k in range(n)]
@@ -139,8 +148,11 @@ def common_scale_images(tmap: TactileMap, pressure: np.ndarray) -> np.ndarray:
     their noise to full white). pressure : (T, N) float, any unit. Returns (T, H, W) uint8."""
     fields = np.clip(tmap.interpolate(np.asarray(pressure, dtype=np.float64)), 0.0, None)
     top = float(fields.max())
-    return np.floor(255.0 * fields / top + 1e-9).astype(np.uint8) if top > 0 else \
-        np.zeros(fields.shape, np.uint8)
+    return (
+        np.floor(255.0 * fields / top + 1e-9).astype(np.uint8)
+        if top > 0
+        else np.zeros(fields.shape, np.uint8)
+    )
 
 
 def sequence_frames_rgb(images: np.ndarray, scale: int = 1) -> np.ndarray:
@@ -153,8 +165,12 @@ def sequence_frames_rgb(images: np.ndarray, scale: int = 1) -> np.ndarray:
 
 
 def sequence_strip(
-    images: np.ndarray, times_s: Sequence[float] | None = None, *, title: str = "",
-    max_frames: int = 12, tile_in: float = 1.8,
+    images: np.ndarray,
+    times_s: Sequence[float] | None = None,
+    *,
+    title: str = "",
+    max_frames: int = 12,
+    tile_in: float = 1.8,
 ) -> Figure:
     """The frames of one interaction side by side (at most ``max_frames``, evenly picked).
 
@@ -186,8 +202,14 @@ def save_sequence_gif(
     frames = [Image.fromarray(f) for f in sequence_frames_rgb(images, scale)]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    frames[0].save(path, save_all=True, append_images=frames[1:], loop=0,
-                   duration=round(1000.0 / fps), optimize=True)
+    frames[0].save(
+        path,
+        save_all=True,
+        append_images=frames[1:],
+        loop=0,
+        duration=round(1000.0 / fps),
+        optimize=True,
+    )
     return path
 
 
@@ -201,7 +223,11 @@ def error_picture(image: np.ndarray, true: np.ndarray, pred: np.ndarray) -> np.n
 
 
 def prediction_figure(
-    image: np.ndarray, true: np.ndarray | None, pred: np.ndarray, *, title: str = "",
+    image: np.ndarray,
+    true: np.ndarray | None,
+    pred: np.ndarray,
+    *,
+    title: str = "",
     pred_name: str = "predicted",
 ) -> Figure:
     """Original image | true labels | predicted segmentation | errors in red (Figs. 12–13).
@@ -213,11 +239,14 @@ def prediction_figure(
     """
     image, pred = np.asarray(image), np.asarray(pred)
     if image.shape != pred.shape or (true is not None and np.shape(true) != image.shape):
-        raise MapError(f"image {image.shape}, true {np.shape(true) if true is not None else None}"
-                       f" and pred {pred.shape} differ")
+        raise MapError(
+            f"image {image.shape}, true {np.shape(true) if true is not None else None}"
+            f" and pred {pred.shape} differ"
+        )
     n = 2 if true is None else 4
-    fig = Figure(figsize=(13 / 4 * n, 1.0 + 13 / 4 * image.shape[0] / image.shape[1]),
-                 layout="constrained")
+    fig = Figure(
+        figsize=(13 / 4 * n, 1.0 + 13 / 4 * image.shape[0] / image.shape[1]), layout="constrained"
+    )
     axes = fig.subplots(1, n)
     _show(axes[0], image, "tactile image")
     _show(axes[1 if true is None else 2], overlay(image, pred), pred_name)
@@ -226,8 +255,9 @@ def prediction_figure(
         fg = (image > 0) | (true > 0) | (pred > 0)
         acc = float((true[fg] == pred[fg]).mean()) if fg.any() else 1.0
         _show(axes[1], overlay(image, true), "true labels")
-        _show(axes[3], error_picture(image, true, pred),
-              f"errors (red), accuracy {100 * acc:.1f} %")
+        _show(
+            axes[3], error_picture(image, true, pred), f"errors (red), accuracy {100 * acc:.1f} %"
+        )
     palette_legend(fig, ncols=6 if n == 4 else 3)
     if title:
         fig.suptitle(title, fontsize=10)
@@ -235,8 +265,12 @@ def prediction_figure(
 
 
 def part_bars_figure(
-    labels: np.ndarray | None, pressure_pa: np.ndarray, *, pred_labels: np.ndarray | None = None,
-    threshold_pa: float = 0.0, title: str = "",
+    labels: np.ndarray | None,
+    pressure_pa: np.ndarray,
+    *,
+    pred_labels: np.ndarray | None = None,
+    threshold_pa: float = 0.0,
+    title: str = "",
 ) -> Figure:
     """Per hand part: mean pressure (kPa) and pressed taxel count, bars in PALETTE (Fig. 18).
 
@@ -245,8 +279,11 @@ def part_bars_figure(
     Pa. threshold_pa : a taxel counts when its pressure exceeds it, Pa. Predicted bars are
     hatched; with both series, a legend tells them apart.
     """
-    series = [(name, lab, k) for k, (name, lab) in
-              enumerate((("true", labels), ("predicted", pred_labels))) if lab is not None]
+    series = [
+        (name, lab, k)
+        for k, (name, lab) in enumerate((("true", labels), ("predicted", pred_labels)))
+        if lab is not None
+    ]
     if not series:
         raise MapError("part_bars_figure needs true labels, predicted labels or both")
     names = CLASS_NAMES[1:]
@@ -255,8 +292,13 @@ def part_bars_figure(
     ax_p, ax_n = fig.subplots(1, 2)
     for j, (name, lab, hatched) in enumerate(series):
         summary = part_summary(lab, pressure_pa, threshold=threshold_pa)
-        kw = {"color": PALETTE[1:] / 255.0, "edgecolor": "k", "linewidth": 0.5,
-              "hatch": "//" if hatched else None, "label": name}
+        kw = {
+            "color": PALETTE[1:] / 255.0,
+            "edgecolor": "k",
+            "linewidth": 0.5,
+            "hatch": "//" if hatched else None,
+            "label": name,
+        }
         offset = x + (j - (len(series) - 1) / 2) * width
         ax_p.bar(offset, [summary[n].mean_pressure / 1e3 for n in names], width, **kw)
         ax_n.bar(offset, [summary[n].n_taxels for n in names], width, **kw)
@@ -265,8 +307,13 @@ def part_bars_figure(
         ax.set_xlabel("hand part")
         ax.set_ylabel(label)
         ax.grid(axis="y", alpha=0.3)
-        ax.legend(handles=[Patch(facecolor="w", edgecolor="k", hatch="//" if h else None,
-                                 label=name) for name, _, h in series], fontsize=8)
+        ax.legend(
+            handles=[
+                Patch(facecolor="w", edgecolor="k", hatch="//" if h else None, label=name)
+                for name, _, h in series
+            ],
+            fontsize=8,
+        )
     if title:
         fig.suptitle(title, fontsize=10)
     return fig

@@ -133,9 +133,14 @@ class TactileMap:
         mesh = triangulate(layout.positions_m, layout.normals, **tri_kw)
         flat = flatten(layout.positions_m, mesh, **flat_kw)
         return cls.from_flat(
-            layout.positions_m, flat.vertex_uv_mm, flat.vertex_taxel, flat.faces,
-            step_mm=step_mm, distortion=flat.distortion, taxel_uv_mm=flat.taxel_uv_mm,
-        )  # fmt: skip
+            layout.positions_m,
+            flat.vertex_uv_mm,
+            flat.vertex_taxel,
+            flat.faces,
+            step_mm=step_mm,
+            distortion=flat.distortion,
+            taxel_uv_mm=flat.taxel_uv_mm,
+        )
 
     @property
     def n_taxels(self) -> int:
@@ -227,10 +232,17 @@ class TactileMap:
         """Write the map to ``path`` (.npz): geometry, distortion; the table is rebuilt on load."""
         extra = {f"distortion_{k}": getattr(self.distortion, k) for k in _DISTORTION}
         np.savez_compressed(
-            path, format=FORMAT, step_mm=self.step_mm, positions_m=self.positions_m, uv=self.uv,
-            vertex_uv_mm=self.vertex_uv_mm, vertex_taxel=self.vertex_taxel, faces=self.faces,
-            distortion_n_flipped=self.distortion.n_flipped, **extra,
-        )  # fmt: skip
+            path,
+            format=FORMAT,
+            step_mm=self.step_mm,
+            positions_m=self.positions_m,
+            uv=self.uv,
+            vertex_uv_mm=self.vertex_uv_mm,
+            vertex_taxel=self.vertex_taxel,
+            faces=self.faces,
+            distortion_n_flipped=self.distortion.n_flipped,
+            **extra,
+        )
 
     @classmethod
     def load(cls, path: str | PathLike[str]) -> TactileMap:
@@ -252,9 +264,14 @@ class TactileMap:
             *(data[f"distortion_{k}"] for k in _DISTORTION), int(data["distortion_n_flipped"])
         )
         return cls.from_flat(
-            data["positions_m"], data["vertex_uv_mm"], data["vertex_taxel"], data["faces"],
-            step_mm=float(data["step_mm"]), distortion=report, taxel_uv_mm=data["uv"],
-        )  # fmt: skip
+            data["positions_m"],
+            data["vertex_uv_mm"],
+            data["vertex_taxel"],
+            data["faces"],
+            step_mm=float(data["step_mm"]),
+            distortion=report,
+            taxel_uv_mm=data["uv"],
+        )
 
 
 def _route_options(kw: dict, *functions: object) -> list[dict]:

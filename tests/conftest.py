@@ -70,8 +70,12 @@ def group_sides(subject_id, instance_id, train_index) -> dict:
     train = np.zeros(len(subject_id), bool)
     train[np.asarray(train_index, dtype=np.int64)] = True
     sides: dict = {}
-    for s, i, t in zip(np.asarray(subject_id).tolist(), np.asarray(instance_id).tolist(),
-                       train.tolist(), strict=True):  # fmt: skip
+    for s, i, t in zip(
+        np.asarray(subject_id).tolist(),
+        np.asarray(instance_id).tolist(),
+        train.tolist(),
+        strict=True,
+    ):
         sides.setdefault((0, s) if s >= 0 else (1, i), set()).add(t)
     assert all(len(v) == 1 for v in sides.values()), "a subject or instance on both sides"
     return {k: v.pop() for k, v in sides.items()}

@@ -29,7 +29,8 @@ def anchors(page: Path) -> set[str]:
 def test_github_anchor_rule():
     assert github_anchor("HandsNet's speed by machine") == "handsnets-speed-by-machine"
     assert github_anchor("Data, width, flips, averaging, finger spread, shifts") == (
-        "data-width-flips-averaging-finger-spread-shifts")
+        "data-width-flips-averaging-finger-spread-shifts"
+    )
     assert github_anchor("`handskin view` and **forearm_x2**") == "handskin-view-and-forearm_x2"
 
 

@@ -29,8 +29,9 @@ def tiny_base():
     from sim.episode import EpisodeConfig
     from sim.gen_config import GenerateConfig
 
-    return GenerateConfig(part="plate", n_subjects=4, instances_per_kind=2,
-                          episode=EpisodeConfig(max_attempts=20))  # fmt: skip
+    return GenerateConfig(
+        part="plate", n_subjects=4, instances_per_kind=2, episode=EpisodeConfig(max_attempts=20)
+    )
 
 
 @pytest.fixture(scope="module")
@@ -61,13 +62,20 @@ def test_report_folder_has_tables_and_a_chart(run):
 
     out, results = run
     text = (out / "report.md").read_text()
-    for title in ("## Protocol", "## Settings, speed and accuracy", "## Not swept",
-                  "## Choice of default", "**Rule.**", "**Outcome.**"):  # fmt: skip
+    for title in (
+        "## Protocol",
+        "## Settings, speed and accuracy",
+        "## Not swept",
+        "## Choice of default",
+        "**Rule.**",
+        "**Outcome.**",
+    ):
         assert title in text
     for name in SETTINGS:
         assert f"| `{name}` |" in text
     assert json.loads((out / "results.json").read_text())["results"] == json.loads(
-        json.dumps(results))
+        json.dumps(results)
+    )
     img = mpimg.imread(out / "speed_accuracy.png")
     colours = np.unique(img[..., :3].reshape(-1, 3).round(2), axis=0)
     assert img.std() > 0.05 and len(colours) > 20
@@ -84,8 +92,7 @@ def test_every_accuracy_equals_a_per_image_reevaluation(run):
     test_dir = results["test_set"]["dataset"]
     with open_dataset(test_dir) as ds:
         test = ds.splits["test"]
-        images = [resize_image(ds.image[i].astype(np.float32) / 255, KW["image_px"])
-                  for i in test]  # fmt: skip
+        images = [resize_image(ds.image[i].astype(np.float32) / 255, KW["image_px"]) for i in test]
         truth = ds.is_hand[:][test].astype(np.int64)
     assert len(test) == results["test_set"]["n_test"] and 0 < truth.sum() < len(truth)
     for row in results["settings"]:
@@ -145,8 +152,10 @@ def test_no_person_or_object_of_the_test_split_is_trained_on(run):
         with open_dataset(folder) as ds:
             raw = ds["contactor"][:]
         chosen = raw if indices is None else raw[indices]
-        return [json.dumps({k: v for k, v in json.loads(c).items() if k != "press"},
-                           sort_keys=True) for c in chosen]  # fmt: skip
+        return [
+            json.dumps({k: v for k, v in json.loads(c).items() if k != "press"}, sort_keys=True)
+            for c in chosen
+        ]
 
     _, results = run
     test_dir = results["test_set"]["dataset"]
@@ -184,8 +193,10 @@ def test_rule_against_brute_force_on_random_inputs():
     for _ in range(200):
         n = int(rng.integers(1, 7))
         speeds = [None if rng.random() < 0.2 else float(rng.uniform(1, 50)) for _ in range(n)]
-        accs = [None if rng.random() < 0.2 else float(rng.choice([60.0, 80.0, 90.5, 91.0]))
-                for _ in range(n)]  # fmt: skip
+        accs = [
+            None if rng.random() < 0.2 else float(rng.choice([60.0, 80.0, 90.5, 91.0]))
+            for _ in range(n)
+        ]
         n_test = int(rng.integers(10, 2000))
         got = FR.choose_default(speeds, accs, n_test)
         known = [i for i in range(n) if speeds[i] is not None and accs[i] is not None]
@@ -217,8 +228,14 @@ def test_a_dataset_without_recorded_speed_is_reused_as_unknown(run, tmp_path):
     timing.unlink()
     shutil.copytree(out / "models", tmp_path / "o" / "models")  # reused: no training
     try:
-        again = run_fidelity(tmp_path / "o", data_dir=out / "data", settings=SETTINGS,
-                             base=tiny_base(), progress=False, **KW)  # fmt: skip
+        again = run_fidelity(
+            tmp_path / "o",
+            data_dir=out / "data",
+            settings=SETTINGS,
+            base=tiny_base(),
+            progress=False,
+            **KW,
+        )
     finally:
         timing.write_text(saved)
     row = _rows(again)["cheapest"]
@@ -238,30 +255,51 @@ def test_segnet_option_reports_a_mean_iou_that_pixel_counts_reproduce(run, tmp_p
 
     out, results = run
     shutil.copytree(out / "models", tmp_path / "o" / "models")  # HandsNet reused
-    res = run_fidelity(tmp_path / "o", data_dir=out / "data", settings=["default"], segnet=True,
-                       base=tiny_base(), progress=False, **KW)  # fmt: skip
+    res = run_fidelity(
+        tmp_path / "o",
+        data_dir=out / "data",
+        settings=["default"],
+        segnet=True,
+        base=tiny_base(),
+        progress=False,
+        **KW,
+    )
     (ckpt,) = (tmp_path / "o" / "models").glob(f"segnet-default-*/{LAST}")
     model = model_from_checkpoint(load_checkpoint(ckpt))[0]
     size = KW["image_px"]
     with open_dataset(results["test_set"]["dataset"]) as ds:
         test = ds.splits["test"]
-        x = np.stack([resize_image(ds.image[i].astype(np.float32) / 255, size, keep_support=True)
-                      for i in test])  # segmentation inputs (learn.inputs)
+        x = np.stack(
+            [
+                resize_image(ds.image[i].astype(np.float32) / 255, size, keep_support=True)
+                for i in test
+            ]
+        )  # segmentation inputs (learn.inputs)
         truth = np.stack([resize_labels(ds.label_image[i], size) for i in test])
     with torch.no_grad():
         pred = model(torch.from_numpy(x)[:, None]).argmax(1).numpy()
     pred = np.where(x > 0, pred, 0)  # unpressed pixels are background (learn.inputs)
-    ious = [np.sum((pred == c) & (truth == c)) / np.sum((pred == c) | (truth == c))
-            for c in range(7) if np.any(truth == c)]  # fmt: skip
+    ious = [
+        np.sum((pred == c) & (truth == c)) / np.sum((pred == c) | (truth == c))
+        for c in range(7)
+        if np.any(truth == c)
+    ]
     assert res["settings"][0]["miou_pct"] == pytest.approx(100 * np.mean(ious))
     assert (tmp_path / "o" / "speed_miou.png").is_file()
     assert "SegNet mIoU %" in (tmp_path / "o" / "report.md").read_text()
 
 
-@pytest.mark.parametrize("change", [
-    {"settings": ["default", "bogus"]}, {"n": 3}, {"epochs": 0}, {"image_px": (16, 48)},
-    {"workers": 0}, {"seed": -1},
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "change",
+    [
+        {"settings": ["default", "bogus"]},
+        {"n": 3},
+        {"epochs": 0},
+        {"image_px": (16, 48)},
+        {"workers": 0},
+        {"seed": -1},
+    ],
+)
 def test_bad_input_fails_before_any_work(tmp_path, change):
     kw = {**KW, "settings": SETTINGS, **change}
     with pytest.raises(ConfigError):
@@ -274,7 +312,8 @@ def test_cli_reports_a_bad_setting_with_exit_code_2(tmp_path):
 
     from handskin.cli import app
 
-    res = CliRunner().invoke(app, ["experiment", "fidelity", "--out", str(tmp_path / "o"),
-                                   "--settings", "default,nope"])  # fmt: skip
+    res = CliRunner().invoke(
+        app, ["experiment", "fidelity", "--out", str(tmp_path / "o"), "--settings", "default,nope"]
+    )
     assert res.exit_code == 2 and "nope" in res.output and "choose among" in res.output
     assert not (tmp_path / "o").exists()

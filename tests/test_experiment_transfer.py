@@ -22,9 +22,15 @@ from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError
 from tactile.resize import resize_image
 
-SETTINGS = TransferSettings(curve_sizes=(4, 8), finetune_epochs=2, pretrain_epochs=2,
-                            pretrain_flips=False, input_size=(32, 48), seed=1,
-                            threads=1)  # fmt: skip
+SETTINGS = TransferSettings(
+    curve_sizes=(4, 8),
+    finetune_epochs=2,
+    pretrain_epochs=2,
+    pretrain_flips=False,
+    input_size=(32, 48),
+    seed=1,
+    threads=1,
+)
 PLAN = T.DataPlan(n_source=24, n_target=40, n_pretrain=24, tiny=True)
 
 
@@ -90,8 +96,9 @@ def test_zero_shot_equals_an_independent_evaluation(transfer_run):
     model, run = model_from_checkpoint(load_checkpoint(r["forearm_checkpoint"]))
     with DatasetReader(out / "data" / "end_effector") as ds:
         test = ds.splits["test"]
-        x = np.stack([resize_image(ds.image[i].astype(np.float32) / 255, run.model.input_size)
-                      for i in test])  # fmt: skip
+        x = np.stack(
+            [resize_image(ds.image[i].astype(np.float32) / 255, run.model.input_size) for i in test]
+        )
         truth = ds.is_hand[:][test]
     with torch.no_grad():
         pred = model(torch.from_numpy(x)[:, None]).argmax(1).numpy()
@@ -116,8 +123,15 @@ def test_synthetic_pretraining_leaves_out_the_target_test_instances(transfer_run
 def test_transfer_report_and_chart(transfer_run):
     out, res = transfer_run
     text = (out / "report.md").read_text()
-    for needle in ("(paper: Table 15)", "(paper: Table 16)", "learning curve", "unknown",
-                   "true \\ predicted", "end_effector_synthetic", "halved after 1 of 2"):
+    for needle in (
+        "(paper: Table 15)",
+        "(paper: Table 16)",
+        "learning curve",
+        "unknown",
+        "true \\ predicted",
+        "end_effector_synthetic",
+        "halved after 1 of 2",
+    ):
         assert needle in text, needle
     img = imread(out / "curve_classify.png")[..., :3]
     assert img.std() > 0.05 and (img.mean(-1) < 0.5).mean() > 0.005
@@ -167,7 +181,8 @@ def test_segmentation_alone(transfer_run, tmp_path):
 
 
 def test_keep_scale_feeds_the_forearm_model_images_centred_at_the_forearm_scale(
-        transfer_run, tmp_path, monkeypatch):  # fmt: skip
+    transfer_run, tmp_path, monkeypatch
+):
     """--keep-scale adds "forearm at scale" rows: the forearm model is scored on end-effector
     images zero-padded by hand to the forearm map's size (mm) before the resize (the very
     tensor, and its score), it fine-tunes on the same subsets as the other starts, and the
@@ -179,10 +194,12 @@ def test_keep_scale_feeds_the_forearm_model_images_centred_at_the_forearm_scale(
     ckpt = res["classify"]["forearm_checkpoint"]
     s = dataclasses.replace(SETTINGS, keep_scale=True)
     scored, score = [], transfer_lib.score
-    monkeypatch.setattr(transfer_lib, "score",
-                        lambda m, test, n: scored.append(test.x) or score(m, test, n))
-    got = T.run_transfer_experiment(tmp_path, s=s, plan=PLAN, progress=False, classifier=ckpt,
-                                    **data)["classify"]  # fmt: skip
+    monkeypatch.setattr(
+        transfer_lib, "score", lambda m, test, n: scored.append(test.x) or score(m, test, n)
+    )
+    got = T.run_transfer_experiment(
+        tmp_path, s=s, plan=PLAN, progress=False, classifier=ckpt, **data
+    )["classify"]
     model, run = model_from_checkpoint(load_checkpoint(ckpt))
     with DatasetReader(data["source"]) as ds:
         canvas = ds.map.shape  # 1 mm grid
@@ -268,17 +285,30 @@ def app() -> typer.Typer:
         (["--n-target", "0"], "n = 0 is out of range"),
         (["--no-classification"], "neither classification nor segmentation"),
         (["--precision", "fp16"], "precision 'fp16'"),
-        (["--no-classification", "--segmentation", "--classifier", "{classifier}"],
-         "--classifier with --no-classification"),
+        (
+            ["--no-classification", "--segmentation", "--classifier", "{classifier}"],
+            "--classifier with --no-classification",
+        ),
     ],
 )
 def test_bad_input_fails_before_work(app, transfer_run, tmp_path, args, message):
     _, res = transfer_run
     out = tmp_path / "out"
-    names = {"missing": str(tmp_path / "missing.pt"),
-             "classifier": res["classify"]["forearm_checkpoint"]}  # fmt: skip
-    result = CliRunner().invoke(app, ["transfer", "--out", str(out), "--quick", "--no-progress",
-                                      *(a.format(**names) for a in args)])  # fmt: skip
+    names = {
+        "missing": str(tmp_path / "missing.pt"),
+        "classifier": res["classify"]["forearm_checkpoint"],
+    }
+    result = CliRunner().invoke(
+        app,
+        [
+            "transfer",
+            "--out",
+            str(out),
+            "--quick",
+            "--no-progress",
+            *(a.format(**names) for a in args),
+        ],
+    )
     assert result.exit_code == 2, result.output
     assert "error:" in result.output and message in result.output, result.output
     assert not out.exists()

@@ -47,18 +47,37 @@ class FaultAwareScale:
 
     def __post_init__(self) -> None:
         if min(self.epochs) < 1 or self.copies < 1 or not self.lr_factor > 0:
-            raise ConfigError(f"fault-aware training: epochs and copies >= 1, lr factor > 0; "
-                              f"got {self.epochs}, {self.copies}, {self.lr_factor}")  # fmt: skip
+            raise ConfigError(
+                f"fault-aware training: epochs and copies >= 1, lr factor > 0; "
+                f"got {self.epochs}, {self.copies}, {self.lr_factor}"
+            )
 
 
-FULL_FA = FaultAwareScale(Scale(5, None, 128, n_spots=(2, 4), radii_mm=(20.0, 40.0)),
-                          epochs=(3, 2), n_train=(None, 600), copies=2)  # fmt: skip
-QUICK_FA = FaultAwareScale(Scale(1, 300, 40, n_spots=(4,), radii_mm=(40.0,), plan=QUICK_PLAN),
-                           epochs=(1, 1), n_train=(400, 200), copies=1)  # fmt: skip
+FULL_FA = FaultAwareScale(
+    Scale(5, None, 128, n_spots=(2, 4), radii_mm=(20.0, 40.0)),
+    epochs=(3, 2),
+    n_train=(None, 600),
+    copies=2,
+)
+QUICK_FA = FaultAwareScale(
+    Scale(1, 300, 40, n_spots=(4,), radii_mm=(40.0,), plan=QUICK_PLAN),
+    epochs=(1, 1),
+    n_train=(400, 200),
+    copies=1,
+)
 
 
-def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int | None,
-                      scale: FaultAwareScale, seed: int, progress: bool) -> dict:  # fmt: skip
+def fault_aware_model(
+    plain: Path,
+    data,
+    out: Path,
+    *,
+    epochs: int,
+    n_train: int | None,
+    scale: FaultAwareScale,
+    seed: int,
+    progress: bool,
+) -> dict:
     """Fine-tune ``plain`` with faulty copies into ``out`` (reused when finished there, resumed
     when stopped); returns {checkpoint, minutes, train images} (None when reused), minutes
     being the epochs' own training time summed over every part of a resumed run."""
@@ -67,9 +86,15 @@ def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int
     from learn.experiments.robustness_faults import augmented_data
     from learn.train import replace_train, run_from_dict
 
-    recipe = {"from": str(plain), "epochs": epochs, "n_train": n_train, "seed": seed,
-              "copies": scale.copies, "lr_factor": scale.lr_factor,
-              "mix": dataclasses.asdict(scale.mix)}  # fmt: skip
+    recipe = {
+        "from": str(plain),
+        "epochs": epochs,
+        "n_train": n_train,
+        "seed": seed,
+        "copies": scale.copies,
+        "lr_factor": scale.lr_factor,
+        "mix": dataclasses.asdict(scale.mix),
+    }
     if (out / "last.pt").is_file() or (out / "best.pt").is_file():
         _check_recipe(out, recipe)
     else:  # written before training, so a stopped run still matches it when resumed
@@ -80,8 +105,9 @@ def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int
     # no type head and no teacher: both are training aids of the plain run (`learn.aux_types`,
     # `learn.distill`), and the faulty copies carry no contactor types; the fine-tuned network
     # is the same plain network
-    run = dataclasses.replace(run, flips=False, device=scale.eval.plan.device,
-                              aux_types_weight=0.0, distill_from="")  # fmt: skip
+    run = dataclasses.replace(
+        run, flips=False, device=scale.eval.plan.device, aux_types_weight=0.0, distill_from=""
+    )
     made: list = []  # the augmented data, when this call trains
 
     def make_data():
@@ -94,9 +120,14 @@ def fault_aware_model(plain: Path, data, out: Path, *, epochs: int, n_train: int
         return {"checkpoint": str(best), "minutes": None, "train_images": None}
     # the epochs' own seconds, summed over every part of a resumed run (not this call's clock)
     seconds = sum(row["seconds"] for row in load_checkpoint(out / "last.pt")["history"])
-    return {"checkpoint": str(best), "train_images": len(made[0].train.y),
-            "minutes": seconds / 60, "resumed": resumed, "epochs": epochs,
-            "lr": run.train.lr}  # fmt: skip
+    return {
+        "checkpoint": str(best),
+        "train_images": len(made[0].train.y),
+        "minutes": seconds / 60,
+        "resumed": resumed,
+        "epochs": epochs,
+        "lr": run.train.lr,
+    }
 
 
 RECIPE = "fault_aware.json"  # how a fault-aware network was made, beside its best.pt
@@ -107,13 +138,24 @@ def _check_recipe(out: Path, recipe: dict) -> None:
     path = out / RECIPE
     found = json.loads(path.read_text()) if path.is_file() else None
     if found != json.loads(json.dumps(recipe)):
-        raise ConfigError(f"{out} holds a fault-aware network made otherwise ({path}: {found}); "
-                          "remove the folder or give another --models folder")  # fmt: skip
+        raise ConfigError(
+            f"{out} holds a fault-aware network made otherwise ({path}: {found}); "
+            "remove the folder or give another --models folder"
+        )
 
 
-def run_fault_aware(data, out, *, scale: FaultAwareScale = FULL_FA, seed: int = 0,
-                    classifier=None, segmenter=None, models_dir=None, threads: int = 2,
-                    progress: bool = True) -> Path:  # fmt: skip
+def run_fault_aware(
+    data,
+    out,
+    *,
+    scale: FaultAwareScale = FULL_FA,
+    seed: int = 0,
+    classifier=None,
+    segmenter=None,
+    models_dir=None,
+    threads: int = 2,
+    progress: bool = True,
+) -> Path:
     """Train the fault-aware networks, evaluate both kinds; returns the report's path."""
     from learn.experiments.report import Report
     from learn.experiments.robustness_eval import Predictor, blind_spot_study, removal_study
@@ -121,11 +163,18 @@ def run_fault_aware(data, out, *, scale: FaultAwareScale = FULL_FA, seed: int = 
     from learn.experiments.robustness_setup import check_inputs, config_of, prepare
 
     check_inputs(data, classifier, segmenter, threads, scale.eval.plan.device)
-    rep = Report("fault-aware", out, seed=seed, config={
-        **config_of(data, scale.eval, classifier, segmenter, threads),
-        "fault_aware": dataclasses.asdict(scale)})  # fmt: skip
-    prep = prepare(data, out, scale.eval, seed, classifier, segmenter, models_dir, threads,
-                   progress)  # fmt: skip
+    rep = Report(
+        "fault-aware",
+        out,
+        seed=seed,
+        config={
+            **config_of(data, scale.eval, classifier, segmenter, threads),
+            "fault_aware": dataclasses.asdict(scale),
+        },
+    )
+    prep = prepare(
+        data, out, scale.eval, seed, classifier, segmenter, models_dir, threads, progress
+    )
     plain, info, frames = prep.models, prep.info, prep.frames
     tic = time.perf_counter()
     models_dir = Path(models_dir) if models_dir is not None else Path(out) / "models"
@@ -133,10 +182,16 @@ def run_fault_aware(data, out, *, scale: FaultAwareScale = FULL_FA, seed: int = 
     aware, trained = [], []
     for k, (net, desc) in enumerate(zip(plain, info, strict=True)):
         arch = desc["model"]["arch"]
-        res = fault_aware_model(Path(desc["checkpoint"]), data,
-                                models_dir / f"{arch}_fault_aware{suffix}", epochs=scale.epochs[k],
-                                n_train=scale.n_train[k], scale=scale, seed=seed,
-                                progress=progress)  # fmt: skip
+        res = fault_aware_model(
+            Path(desc["checkpoint"]),
+            data,
+            models_dir / f"{arch}_fault_aware{suffix}",
+            epochs=scale.epochs[k],
+            n_train=scale.n_train[k],
+            scale=scale,
+            seed=seed,
+            progress=progress,
+        )
         aware.append(Predictor.load(f"{net.name} fault-aware", res["checkpoint"]))
         trained.append({"name": aware[-1].name, "from": desc["checkpoint"], **res})
     models = [plain[0], aware[0], plain[1], aware[1]]
@@ -158,14 +213,22 @@ def _opt(kind, help_text: str):
 
 OutOpt = _opt(Path, "Output folder: report.md, results.json, PNG charts, models/.")
 DataOpt = _opt(Path, "Dataset folder (holding dataset.h5).")
-QuickOpt = _opt(bool, "Small run (minutes): 1 epoch on 400 / 200 train samples with 1 faulty "
-                "copy each; 1 pattern per condition, 300 test samples classified, 40 segmented.")
+QuickOpt = _opt(
+    bool,
+    "Small run (minutes): 1 epoch on 400 / 200 train samples with 1 faulty "
+    "copy each; 1 pattern per condition, 300 test samples classified, 40 segmented.",
+)
 SeedOpt = _opt(int, "Seed of every random draw: faults, patterns, subsets (integer).")
-ClfOpt = _opt(Path | None, "Plain classifier checkpoint (.pt file); default: trained here as "
-              "robustness-a does.")
+ClfOpt = _opt(
+    Path | None,
+    "Plain classifier checkpoint (.pt file); default: trained here as robustness-a does.",
+)
 SegOpt = _opt(Path | None, "Plain segmenter checkpoint (.pt file); default: trained here.")
-EpochsOpt = _opt(int | None, "Fine-tuning epochs of both networks (count; default 3 for the "
-                 "classifier and 2 for the segmenter, --quick 1).")
+EpochsOpt = _opt(
+    int | None,
+    "Fine-tuning epochs of both networks (count; default 3 for the "
+    "classifier and 2 for the segmenter, --quick 1).",
+)
 CopiesOpt = _opt(int | None, "Faulty copies of each train sample (count; default 2, --quick 1).")
 PatternsOpt = _opt(int | None, "Random patterns per condition (count; default 5, --quick 1).")
 LrOpt = _opt(float | None, "Fine-tuning learning rate / the plain run's (ratio; default 0.1).")
@@ -176,24 +239,44 @@ ProgressOpt = _opt(bool, "Show progress bars.")
 
 
 def fault_aware_command(
-    out: OutOpt, data: DataOpt, quick: QuickOpt = False, seed: SeedOpt = 0,
-    classifier: ClfOpt = None, segmenter: SegOpt = None, epochs: EpochsOpt = None,
-    copies: CopiesOpt = None, patterns: PatternsOpt = None, lr_factor: LrOpt = None,
-    models: ModelsOpt = None, threads: ThreadsOpt = 2, device: DeviceOpt = "cpu",
+    out: OutOpt,
+    data: DataOpt,
+    quick: QuickOpt = False,
+    seed: SeedOpt = 0,
+    classifier: ClfOpt = None,
+    segmenter: SegOpt = None,
+    epochs: EpochsOpt = None,
+    copies: CopiesOpt = None,
+    patterns: PatternsOpt = None,
+    lr_factor: LrOpt = None,
+    models: ModelsOpt = None,
+    threads: ThreadsOpt = 2,
+    device: DeviceOpt = "cpu",
     progress: ProgressOpt = True,
-) -> None:  # fmt: skip
+) -> None:
     """Fault-aware training (see ``FA_HELP``)."""
     from learn.cli import _fail
 
     try:
         scale = QUICK_FA if quick else FULL_FA
-        changes = {"epochs": None if epochs is None else (epochs, epochs), "copies": copies,
-                   "lr_factor": lr_factor}  # fmt: skip
+        changes = {
+            "epochs": None if epochs is None else (epochs, epochs),
+            "copies": copies,
+            "lr_factor": lr_factor,
+        }
         scale = dataclasses.replace(scale, **{k: v for k, v in changes.items() if v is not None})
         scale = dataclasses.replace(scale, eval=scale.eval.changed(patterns, None, None, device))
-        path = run_fault_aware(data, out, scale=scale, seed=seed, classifier=classifier,
-                               segmenter=segmenter, models_dir=models, threads=threads,
-                               progress=progress)  # fmt: skip
+        path = run_fault_aware(
+            data,
+            out,
+            scale=scale,
+            seed=seed,
+            classifier=classifier,
+            segmenter=segmenter,
+            models_dir=models,
+            threads=threads,
+            progress=progress,
+        )
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     typer.echo(f"report written to {path}")
@@ -206,6 +289,8 @@ def register(app: typer.Typer) -> None:
     app.command("fault-aware", help=FA_HELP)(_needs_torch(fault_aware_command))
 
 
-FA_HELP = ("Fault-aware training: HandsNet and SegNet fine-tuned with blind spots, removed "
-           "taxels, dead modules and gain drift injected; Test B and Test A curves beside the "
-           "plain networks, the paper's 92.67 % at 60 % removed marked.")
+FA_HELP = (
+    "Fault-aware training: HandsNet and SegNet fine-tuned with blind spots, removed "
+    "taxels, dead modules and gain drift injected; Test B and Test A curves beside the "
+    "plain networks, the paper's 92.67 % at 60 % removed marked."
+)

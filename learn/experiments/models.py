@@ -16,10 +16,12 @@ from pathlib import Path
 from tactile.errors import ConfigError, DataError
 
 #: ``--device`` of the experiments that train networks.
-DEVICE_HELP = ("Where the networks trained here train: cpu (the default) or cuda / cuda:N (a GPU, "
-               "with a CUDA build of torch). Networks already in the models folder are reused "
-               "wherever they trained; times per image are measured on the CPU either way; "
-               "no unit.")
+DEVICE_HELP = (
+    "Where the networks trained here train: cpu (the default) or cuda / cuda:N (a GPU, "
+    "with a CUDA build of torch). Networks already in the models folder are reused "
+    "wherever they trained; times per image are measured on the CPU either way; "
+    "no unit."
+)
 
 
 def preset_run(arch: str, *, device: str = "cpu", **train_changes: object):
@@ -68,8 +70,9 @@ def ensure_model(
     run = run if run is not None else preset_run(arch, epochs=epochs, seed=seed, device=device)
     if run.model.arch != arch:
         run = dataclasses.replace(run, model=dataclasses.replace(run.model, arch=arch))
-    return train_once(out, run, lambda: load_data(data, run, progress=progress),
-                      progress=progress)[0]  # fmt: skip
+    return train_once(out, run, lambda: load_data(data, run, progress=progress), progress=progress)[
+        0
+    ]
 
 
 def finished(out_dir: str | Path, run) -> bool:

@@ -18,6 +18,11 @@ HANDSNET_ACCURACY_60PCT_REMOVED = 92.67
 
 #: Test B, classification accuracy (%) by fraction of taxels removed; None = unknown to us.
 TEST_B_CLASSIFICATION_PCT: dict[float, float | None] = {
-    0.1: None, 0.2: None, 0.3: None, 0.4: None, 0.5: None, 0.6: HANDSNET_ACCURACY_60PCT_REMOVED,
+    0.1: None,
+    0.2: None,
+    0.3: None,
+    0.4: None,
+    0.5: None,
+    0.6: HANDSNET_ACCURACY_60PCT_REMOVED,
     0.7: None,
 }

@@ -39,8 +39,9 @@ def parse_size(text: str, full_hw: tuple[int, int]) -> tuple[int, int]:
         return (int(full_hw[0]), int(full_hw[1]))
     match = re.fullmatch(r"(\d+)[x×](\d+)", text.strip())
     if not match or min(int(match[1]), int(match[2])) < 1:
-        raise ConfigError(f"size {text!r}: expected <height>x<width> in pixels (e.g. 68x100) "
-                          "or 'full'")  # fmt: skip
+        raise ConfigError(
+            f"size {text!r}: expected <height>x<width> in pixels (e.g. 68x100) or 'full'"
+        )
     return (int(match[1]), int(match[2]))
 
 
@@ -67,8 +68,9 @@ class ParetoSettings:
     def __post_init__(self) -> None:
         for name in ("widths", "seg_widths"):
             if any(not 0 < w <= 4 for w in getattr(self, name)):
-                raise ConfigError(f"{name} must lie in (0, 4] (channel multipliers), got "
-                                  f"{getattr(self, name)}")  # fmt: skip
+                raise ConfigError(
+                    f"{name} must lie in (0, 4] (channel multipliers), got {getattr(self, name)}"
+                )
         for size in (*self.sizes, *self.seg_sizes):
             parse_size(size, (1, 1))
         if self.budget_min <= 0 or self.time_runs < 1 or self.threads < 1:
@@ -80,9 +82,16 @@ class ParetoSettings:
 
 #: The full setting (≲ 45 min on 2 shared cores with the main models given) and the quick one.
 FULL = ParetoSettings()
-QUICK = ParetoSettings(sizes=("34x50", "68x100"), widths=(0.125,), seg_widths=(0.25,),
-                       seg_sizes=("68x100",), budget_min=0.4, max_train=1000, max_test=300,
-                       time_runs=10)  # fmt: skip
+QUICK = ParetoSettings(
+    sizes=("34x50", "68x100"),
+    widths=(0.125,),
+    seg_widths=(0.25,),
+    seg_sizes=("68x100",),
+    budget_min=0.4,
+    max_train=1000,
+    max_test=300,
+    time_runs=10,
+)
 
 
 @dataclass(frozen=True)
@@ -121,8 +130,7 @@ def given_variant(checkpoint: str | Path, tag: str | None = None) -> Variant:
 
     model = run_from_dict(load_checkpoint(checkpoint)["config"]).model
     width = None if model.arch == "handsnet" else model.width
-    return Variant(model.arch, tuple(model.input_size), width, checkpoint=Path(checkpoint),
-                   tag=tag)  # fmt: skip
+    return Variant(model.arch, tuple(model.input_size), width, checkpoint=Path(checkpoint), tag=tag)
 
 
 def main_variant(checkpoint: Path | None, arch: str, width: float | None) -> Variant:
@@ -133,8 +141,10 @@ def main_variant(checkpoint: Path | None, arch: str, width: float | None) -> Var
     v = given_variant(checkpoint)
     if v.task != TASK[arch]:
         option = "--classifier" if TASK[arch] == "classify" else "--segmenter"
-        raise ConfigError(f"{option} {checkpoint} is a {v.arch} checkpoint; give a "
-                          f"{'classifier' if TASK[arch] == 'classify' else 'segmenter'}")
+        raise ConfigError(
+            f"{option} {checkpoint} is a {v.arch} checkpoint; give a "
+            f"{'classifier' if TASK[arch] == 'classify' else 'segmenter'}"
+        )
     return v
 
 
@@ -145,17 +155,26 @@ def also_variants(paths: list[Path], segment: bool) -> list[Variant]:
     out = [given_variant(p, Path(p).parent.name or Path(p).stem) for p in paths]
     for v in out:
         if v.task == "segment" and not segment:
-            raise ConfigError(f"--also {v.checkpoint} is a {v.arch} checkpoint, but segmentation "
-                              "is off (--no-segmentation, or the dataset has no label images). "
-                              "Fix: drop it or turn segmentation on")  # fmt: skip
+            raise ConfigError(
+                f"--also {v.checkpoint} is a {v.arch} checkpoint, but segmentation "
+                "is off (--no-segmentation, or the dataset has no label images). "
+                "Fix: drop it or turn segmentation on"
+            )
     if len({v.key for v in out}) < len(out):
-        raise ConfigError("two --also checkpoints of one architecture, width and size share a "
-                          "run folder name. Fix: give each its own folder")  # fmt: skip
+        raise ConfigError(
+            "two --also checkpoints of one architecture, width and size share a "
+            "run folder name. Fix: give each its own folder"
+        )
     return out
 
 
-def plan_variants(s: ParetoSettings, full_hw: tuple[int, int], clf: Variant,
-                  seg: Variant | None, also: list[Variant] = ()) -> list[Variant]:  # fmt: skip
+def plan_variants(
+    s: ParetoSettings,
+    full_hw: tuple[int, int],
+    clf: Variant,
+    seg: Variant | None,
+    also: list[Variant] = (),
+) -> list[Variant]:
     """Every variant without duplicates (by key): per task the main model first, then the
     others by input area (so tensors of one size are loaded once and then released); ``also``
     (given checkpoints) are drawn beside the variants of their architecture."""
@@ -168,15 +187,22 @@ def plan_variants(s: ParetoSettings, full_hw: tuple[int, int], clf: Variant,
     out += [Variant("vgg16", clf.size, w) for w in s.widths]
     if seg is not None:
         out += [seg] + [Variant(a, seg.size, w) for a in ("segnet", "fcn16s") for w in s.seg_widths]
-        out += [Variant(seg.arch, parse_size(z, full_hw), seg.width, warm=True)
-                for z in s.seg_sizes]  # fmt: skip
+        out += [
+            Variant(seg.arch, parse_size(z, full_hw), seg.width, warm=True) for z in s.seg_sizes
+        ]
     kept: dict[str, Variant] = {}
     for v in out:
         kept.setdefault(v.key, v)
-    rest = sorted((v for v in kept.values() if v not in (clf, seg)),
-                  key=lambda v: (v.task != "classify", v.size[0] * v.size[1]))  # fmt: skip
-    return [clf, *(v for v in rest if v.task == "classify"), *([seg] if seg else []),
-            *(v for v in rest if v.task == "segment")]  # fmt: skip
+    rest = sorted(
+        (v for v in kept.values() if v not in (clf, seg)),
+        key=lambda v: (v.task != "classify", v.size[0] * v.size[1]),
+    )
+    return [
+        clf,
+        *(v for v in rest if v.task == "classify"),
+        *([seg] if seg else []),
+        *(v for v in rest if v.task == "segment"),
+    ]
 
 
 def variant_run(v: Variant, s: ParetoSettings):
@@ -194,8 +220,10 @@ def check_data(data: Path) -> tuple[tuple[int, int], bool]:
     from tactile.dataset.reader import DatasetReader
 
     if not is_dataset(data):
-        raise DataError(f"no dataset at {data}. Fix: give --data a dataset folder holding "
-                        "dataset.h5 (e.g. from handskin generate)")  # fmt: skip
+        raise DataError(
+            f"no dataset at {data}. Fix: give --data a dataset folder holding "
+            "dataset.h5 (e.g. from handskin generate)"
+        )
     with DatasetReader(data) as ds:
         return tuple(ds.image.shape[1:]), "label_image" in ds.fields
 
@@ -208,15 +236,24 @@ def not_run(s: ParetoSettings, segment: bool) -> list[str]:
     if not segment:
         out.append("segmentation: disabled, or the dataset has no label images")
     elif "full" not in s.seg_sizes:
-        out.append("segmenter at the full map: ~1 s/image at width 0.5 on this CPU (training and "
-                   "scoring exceed the budget); add 'full' to --seg-sizes")
+        out.append(
+            "segmenter at the full map: ~1 s/image at width 0.5 on this CPU (training and "
+            "scoring exceed the budget); add 'full' to --seg-sizes"
+        )
     return out
 
 
-def run_pareto(data: str | Path, out: str | Path, s: ParetoSettings = FULL, *,
-               classifier: str | Path | None = None, segmenter: str | Path | None = None,
-               models_dir: str | Path | None = None, also: list[str | Path] = (),
-               progress: bool = True) -> dict:  # fmt: skip
+def run_pareto(
+    data: str | Path,
+    out: str | Path,
+    s: ParetoSettings = FULL,
+    *,
+    classifier: str | Path | None = None,
+    segmenter: str | Path | None = None,
+    models_dir: str | Path | None = None,
+    also: list[str | Path] = (),
+    progress: bool = True,
+) -> dict:
     """Score and time every variant; write ``out``/report.md, results.json and the charts
     pareto_classification.png, pareto_segmentation.png. Returns the results dict (``rows``:
     one dict per variant, see ``pareto_plot``). ``also``: more checkpoints scored as they are
@@ -230,12 +267,23 @@ def run_pareto(data: str | Path, out: str | Path, s: ParetoSettings = FULL, *,
     full_hw, labelled = check_data(data)
     clf = main_variant(None if classifier is None else Path(classifier), "handsnet", None)
     segment = s.segmentation and labelled
-    seg = main_variant(None if segmenter is None else Path(segmenter), "segnet",
-                       max(s.seg_widths, default=0.5)) if segment else None  # fmt: skip
+    seg = (
+        main_variant(
+            None if segmenter is None else Path(segmenter), "segnet", max(s.seg_widths, default=0.5)
+        )
+        if segment
+        else None
+    )
     given = also_variants(list(also), seg is not None)
     variants = plan_variants(s, full_hw, clf, seg, given)
-    config = {"data": str(data), "classifier": classifier, "segmenter": segmenter,
-              "also": [str(p) for p in also], "full_map_px": full_hw, **to_dict(s)}  # fmt: skip
+    config = {
+        "data": str(data),
+        "classifier": classifier,
+        "segmenter": segmenter,
+        "also": [str(p) for p in also],
+        "full_map_px": full_hw,
+        **to_dict(s),
+    }
     rep = Report("pareto", out, seed=s.seed, config=config)
     runner = Runner(data, s, Path(models_dir) if models_dir else out / "models", progress)
     rows, vgg = [], None
@@ -258,8 +306,10 @@ def _csv(text: str | None, kind: type) -> tuple | None:
     try:
         return tuple(kind(t.strip()) for t in text.split(",") if t.strip())
     except ValueError:
-        raise ConfigError(f"cannot read {text!r} as comma-separated {kind.__name__} values; "
-                          "write e.g. 0.125,0.25 or 34x50,68x100") from None
+        raise ConfigError(
+            f"cannot read {text!r} as comma-separated {kind.__name__} values; "
+            "write e.g. 0.125,0.25 or 34x50,68x100"
+        ) from None
 
 
 def _opt(kind, help_text: str, *names: str):
@@ -269,56 +319,102 @@ def _opt(kind, help_text: str, *names: str):
 def pareto_command(
     out: _opt(Path, "Experiment folder (path): report.md, results.json, PNG charts, models/."),
     data: _opt(Path, "Dataset folder (path) holding dataset.h5, e.g. a forearm dataset."),
-    quick: _opt(bool, "Small version (minutes): HandsNet 34x50 and 68x100, VGG16 w0.125, "
-                "SegNet/FCN w0.25, 0.4 min per variant, 1000 train / 300 test samples.") = False,
+    quick: _opt(
+        bool,
+        "Small version (minutes): HandsNet 34x50 and 68x100, VGG16 w0.125, "
+        "SegNet/FCN w0.25, 0.4 min per variant, 1000 train / 300 test samples.",
+    ) = False,
     seed: _opt(int, "Seed (integer) of initialisation, shuffling and subsets.") = 0,
     classifier: _opt(Path | None, "Main classifier checkpoint (.pt file), used as is.") = None,
     segmenter: _opt(Path | None, "Main segmenter checkpoint (.pt file), used as is.") = None,
-    also: _opt(list[Path] | None, "More checkpoints (.pt files, any architecture) scored as they "
-               "are and named after their run folder, e.g. a fully trained FCN-16s; repeat the "
-               "option for several.") = None,
-    models: _opt(Path | None, "Folder (path) of the variants trained here; default OUT/models; "
-                 "reused by a rerun with the same budget.") = None,
-    sizes: _opt(str | None, "HandsNet input sizes: comma-separated <h>x<w> in pixels, or "
-                "'full' (the dataset's image size). Default 34x50,68x100,136x200,full.") = None,
-    widths: _opt(str | None, "VGG16 classifier widths: comma-separated channel multipliers "
-                 "(1.0 = VGG16's 64..512 channels). Default 0.125,0.25.") = None,
-    seg_widths: _opt(str | None, "SegNet and FCN-16s widths: comma-separated channel "
-                     "multipliers. Default 0.25,0.5.") = None,
-    seg_sizes: _opt(str | None, "Main segmenter's input sizes: <h>x<w> pixels or 'full'. "
-                    "Default 34x50,68x100,136x200.") = None,
-    budget_min: _opt(float | None, "Training budget per trained variant, wall-clock minutes "
-                     "on the CPU (default 2.0; quick 0.4).") = None,
+    also: _opt(
+        list[Path] | None,
+        "More checkpoints (.pt files, any architecture) scored as they "
+        "are and named after their run folder, e.g. a fully trained FCN-16s; repeat the "
+        "option for several.",
+    ) = None,
+    models: _opt(
+        Path | None,
+        "Folder (path) of the variants trained here; default OUT/models; "
+        "reused by a rerun with the same budget.",
+    ) = None,
+    sizes: _opt(
+        str | None,
+        "HandsNet input sizes: comma-separated <h>x<w> in pixels, or "
+        "'full' (the dataset's image size). Default 34x50,68x100,136x200,full.",
+    ) = None,
+    widths: _opt(
+        str | None,
+        "VGG16 classifier widths: comma-separated channel multipliers "
+        "(1.0 = VGG16's 64..512 channels). Default 0.125,0.25.",
+    ) = None,
+    seg_widths: _opt(
+        str | None,
+        "SegNet and FCN-16s widths: comma-separated channel multipliers. Default 0.25,0.5.",
+    ) = None,
+    seg_sizes: _opt(
+        str | None,
+        "Main segmenter's input sizes: <h>x<w> pixels or 'full'. Default 34x50,68x100,136x200.",
+    ) = None,
+    budget_min: _opt(
+        float | None,
+        "Training budget per trained variant, wall-clock minutes "
+        "on the CPU (default 2.0; quick 0.4).",
+    ) = None,
     max_steps: _opt(int | None, "Cap on SGD steps per trained variant (count).") = None,
     max_train: _opt(int | None, "Train samples used (count, seeded subset; 0 = all).") = None,
-    max_test: _opt(int | None, "Test samples scored per variant (count, seeded subset; "
-                   "0 = all; default 500, quick 300).") = None,
-    time_runs: _opt(int | None, "Timed batch-1 runs per model after 20 warm-up runs (count).")
-    = None,
-    warm_start: _opt(bool | None, "Variants at other sizes start from the main model's weights "
-                     "(shapes that match).", "--warm-start/--no-warm-start") = None,
-    classic: _opt(bool | None, "Also BoVW and VGG16 features + SVM.", "--classic/--no-classic")
-    = None,
-    segmentation: _opt(bool | None, "Also the segmentation variants.",
-                       "--segmentation/--no-segmentation") = None,
+    max_test: _opt(
+        int | None,
+        "Test samples scored per variant (count, seeded subset; 0 = all; default 500, quick 300).",
+    ) = None,
+    time_runs: _opt(
+        int | None, "Timed batch-1 runs per model after 20 warm-up runs (count)."
+    ) = None,
+    warm_start: _opt(
+        bool | None,
+        "Variants at other sizes start from the main model's weights (shapes that match).",
+        "--warm-start/--no-warm-start",
+    ) = None,
+    classic: _opt(
+        bool | None, "Also BoVW and VGG16 features + SVM.", "--classic/--no-classic"
+    ) = None,
+    segmentation: _opt(
+        bool | None, "Also the segmentation variants.", "--segmentation/--no-segmentation"
+    ) = None,
     progress: _opt(bool, "Show progress bars.") = True,
 ) -> None:
     """Accuracy / mIoU against CPU ms per image for every model, width and input size."""
     from learn.cli import _fail
 
     try:
-        given = {"sizes": _csv(sizes, str), "widths": _csv(widths, float),
-                 "seg_widths": _csv(seg_widths, float), "seg_sizes": _csv(seg_sizes, str),
-                 "budget_min": budget_min, "max_steps": max_steps, "time_runs": time_runs,
-                 "warm_start": warm_start, "classic": classic, "segmentation": segmentation,
-                 "seed": seed}  # fmt: skip
+        given = {
+            "sizes": _csv(sizes, str),
+            "widths": _csv(widths, float),
+            "seg_widths": _csv(seg_widths, float),
+            "seg_sizes": _csv(seg_sizes, str),
+            "budget_min": budget_min,
+            "max_steps": max_steps,
+            "time_runs": time_runs,
+            "warm_start": warm_start,
+            "classic": classic,
+            "segmentation": segmentation,
+            "seed": seed,
+        }
         changes = {k: v for k, v in given.items() if v is not None}
         for key, value in (("max_train", max_train), ("max_test", max_test)):
             if value is not None:
                 changes[key] = value or None  # 0 = all samples
         settings = dataclasses.replace(QUICK if quick else FULL, **changes)
-        result = run_pareto(data, out, settings, classifier=classifier, segmenter=segmenter,
-                            models_dir=models, also=also or [], progress=progress)  # fmt: skip
+        result = run_pareto(
+            data,
+            out,
+            settings,
+            classifier=classifier,
+            segmenter=segmenter,
+            models_dir=models,
+            also=also or [],
+            progress=progress,
+        )
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     typer.echo(f"report written to {result['report']}")

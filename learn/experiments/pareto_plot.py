@@ -27,18 +27,30 @@ PAPER_POINTS: dict[str, tuple[tuple[str, float, float], ...]] = {
     "segment": (("SegNet", paper.SEGNET_MIOU_PCT, paper.SEGNET_MS_PER_IMAGE),),
 }
 #: Published cells of the variants table (%), by metric key; every other cell is "unknown".
-PAPER_CELLS = {"classify": {"accuracy": paper.HANDSNET_ACCURACY_PCT},
-               "segment": {"pixel_accuracy": paper.SEGNET_ACC_PCT,
-                           "mean_iou": paper.SEGNET_MIOU_PCT}}  # fmt: skip
+PAPER_CELLS = {
+    "classify": {"accuracy": paper.HANDSNET_ACCURACY_PCT},
+    "segment": {"pixel_accuracy": paper.SEGNET_ACC_PCT, "mean_iou": paper.SEGNET_MIOU_PCT},
+}
 SCORE_LABEL = {"classify": "accuracy", "segment": "mean IoU"}
 #: Marker colour, shape and legend name per family of variants.
-FAMILY_STYLE = {"handsnet": ("C0", "o", "HandsNet"), "vgg16": ("C1", "s", "VGG16"),
-                "bovw": ("C2", "^", "BoVW"), "vgg_svm": ("C4", "v", "VGG16 + SVM"),
-                "segnet": ("C0", "o", "SegNet"), "fcn16s": ("C1", "s", "FCN-16s")}  # fmt: skip
+FAMILY_STYLE = {
+    "handsnet": ("C0", "o", "HandsNet"),
+    "vgg16": ("C1", "s", "VGG16"),
+    "bovw": ("C2", "^", "BoVW"),
+    "vgg_svm": ("C4", "v", "VGG16 + SVM"),
+    "segnet": ("C0", "o", "SegNet"),
+    "fcn16s": ("C1", "s", "FCN-16s"),
+}
 #: Table columns per task: (metric key, header).
-COLUMNS = {"classify": (("accuracy", "accuracy %"),),
-           "segment": (("pixel_accuracy", "Acc %"), ("mean_accuracy", "mAcc %"),
-                       ("mean_iou", "mIoU %"), ("fw_iou", "fwIoU %"))}  # fmt: skip
+COLUMNS = {
+    "classify": (("accuracy", "accuracy %"),),
+    "segment": (
+        ("pixel_accuracy", "Acc %"),
+        ("mean_accuracy", "mAcc %"),
+        ("mean_iou", "mIoU %"),
+        ("fw_iou", "fwIoU %"),
+    ),
+}
 
 
 def pareto_mask(ms: Sequence[float], score: Sequence[float]) -> np.ndarray:
@@ -86,17 +98,27 @@ def pareto_chart(rows: Sequence[dict], task: str) -> Figure:
         fx, fy = front_line(ms, pct, x_max)
         ax.step(fx, fy, where="post", c="k", ls="--", lw=1, label="Pareto front (ours)")
     for label, score, p_ms in paper_pts:
-        ax.scatter([p_ms], [score], marker="*", s=160, c="C3", edgecolors="k", zorder=3,
-                   label=f"paper: {label} ({score:.2f} %, {p_ms:g} ms, paper's hardware)")
+        ax.scatter(
+            [p_ms],
+            [score],
+            marker="*",
+            s=160,
+            c="C3",
+            edgecolors="k",
+            zorder=3,
+            label=f"paper: {label} ({score:.2f} %, {p_ms:g} ms, paper's hardware)",
+        )
     ax.set_xscale("log")
     plain = FuncFormatter(lambda v, _: f"{v:g}")
     ax.xaxis.set_major_formatter(plain)
     ax.xaxis.set_minor_formatter(plain)
     ax.tick_params(axis="x", which="minor", labelsize=7)
-    ax.set(xlabel="CPU time per image, ms (batch 1, 1 thread, fast path; log scale)",
-           ylabel=f"{SCORE_LABEL[task]}, %",
-           title=f"{'Classification' if task == 'classify' else 'Segmentation'}: "
-                 f"{SCORE_LABEL[task]} against CPU time")  # fmt: skip
+    ax.set(
+        xlabel="CPU time per image, ms (batch 1, 1 thread, fast path; log scale)",
+        ylabel=f"{SCORE_LABEL[task]}, %",
+        title=f"{'Classification' if task == 'classify' else 'Segmentation'}: "
+        f"{SCORE_LABEL[task]} against CPU time",
+    )
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="best")
     return fig
@@ -113,16 +135,46 @@ def variants_table(rows: Sequence[dict], task: str) -> str:
     front = pareto_mask([r["ms_fast"] for r in scored], [r["score"] for r in scored])
     on = {r["name"] for r, f in zip(scored, front, strict=True) if f}
     keys = [k for k, _ in COLUMNS[task]]
-    head = ["variant", "input h×w (px)", "parameters", "training",
-            *(h for _, h in COLUMNS[task]), "CPU ms/image (eval mode)",
-            "CPU ms/image (fast path)", "resize ms/image", "on front"]  # fmt: skip
-    body = [[r["name"], "×".join(map(str, r["size"])), r["params"], r["training"],
-             *(_pct(r["metrics"].get(k)) for k in keys), r["ms_eval"], r["ms_fast"],
-             r["resize_ms"], "yes" if r["name"] in on else "no"] for r in rows]  # fmt: skip
+    head = [
+        "variant",
+        "input h×w (px)",
+        "parameters",
+        "training",
+        *(h for _, h in COLUMNS[task]),
+        "CPU ms/image (eval mode)",
+        "CPU ms/image (fast path)",
+        "resize ms/image",
+        "on front",
+    ]
+    body = [
+        [
+            r["name"],
+            "×".join(map(str, r["size"])),
+            r["params"],
+            r["training"],
+            *(_pct(r["metrics"].get(k)) for k in keys),
+            r["ms_eval"],
+            r["ms_fast"],
+            r["resize_ms"],
+            "yes" if r["name"] in on else "no",
+        ]
+        for r in rows
+    ]
     for label, _, p_ms in PAPER_POINTS[task]:
         cells = [PAPER_CELLS[task].get(k) for k in keys]
-        body.append([f"{label} (paper)", "68×100", None, "published; time on the paper's "
-                     "hardware", *cells, None, p_ms, None, "not compared"])  # fmt: skip
+        body.append(
+            [
+                f"{label} (paper)",
+                "68×100",
+                None,
+                "published; time on the paper's hardware",
+                *cells,
+                None,
+                p_ms,
+                None,
+                "not compared",
+            ]
+        )
     return markdown_table(head, body)
 
 
@@ -138,10 +190,14 @@ def setup_text(rows: Sequence[dict], data: str, config: dict) -> str:
         "the preset's first-phase learning rate and batch, the paper's flips, no validation "
         "(last weights); variants at other sizes start from the main model where shapes match "
         f"(warm start: {config['warm_start']}). Such short budgets make the scores of the slow "
-        "variants lower bounds." + (
+        "variants lower bounds."
+        + (
             " **At this budget networks trained here barely leave chance level**: give the main "
             "models (--classifier, --segmenter) or use the full setting for meaningful scores."
-            if config["budget_min"] < 1 else "") + "\n\n"
+            if config["budget_min"] < 1
+            else ""
+        )
+        + "\n\n"
         "CPU time: `learn.fastpath.cpu_ms_per_image` — median over the timed runs after 20 "
         "warm-up runs, batch 1, 1 thread, network forward only on a random input, for the model "
         "in eval mode and for the fast path (`fast_inference`: batch norm folded, channels-last,"
@@ -160,18 +216,21 @@ def write_report(rep, rows: list[dict], not_run: list[str], data) -> dict:
     """Tables, charts and notes into ``rep`` (a ``Report``); returns the results dict."""
     rep.section("Setup", setup_text(rows, str(data), rep.config))
     results: dict = {"rows": rows, "not_run": not_run, "front": {}}
-    for task, title, png in (("classify", "Classification (paper: Table 3)",
-                              "pareto_classification.png"),
-                             ("segment", "Segmentation (paper: Table 8)",
-                              "pareto_segmentation.png")):  # fmt: skip
+    for task, title, png in (
+        ("classify", "Classification (paper: Table 3)", "pareto_classification.png"),
+        ("segment", "Segmentation (paper: Table 8)", "pareto_segmentation.png"),
+    ):
         mine = [r for r in rows if r["task"] == task]
         if not mine:
             continue
         rep.section(f"{title}: {SCORE_LABEL[task]} against CPU time", variants_table(rows, task))
-        rep.figure(pareto_chart(rows, task), png,
-                   f"Test {SCORE_LABEL[task]} against CPU ms/image (log scale); the "
-                   "dashed step line is our Pareto front; the star is the paper's published "
-                   "model, timed on the paper's hardware (not comparable with ours).")
+        rep.figure(
+            pareto_chart(rows, task),
+            png,
+            f"Test {SCORE_LABEL[task]} against CPU ms/image (log scale); the "
+            "dashed step line is our Pareto front; the star is the paper's published "
+            "model, timed on the paper's hardware (not comparable with ours).",
+        )
         scored = [r for r in mine if np.isfinite(r["score"])]
         mask = pareto_mask([r["ms_fast"] for r in scored], [r["score"] for r in scored])
         results["front"][task] = [r["name"] for r, m in zip(scored, mask, strict=True) if m]

@@ -37,8 +37,9 @@ def batches(run, n_items: int):
             yield order[start : start + run.train.batch_size]
 
 
-def train_budgeted(run, train, budget_s: float, max_steps: float, init_from=None,
-                   progress: bool = False):  # fmt: skip
+def train_budgeted(
+    run, train, budget_s: float, max_steps: float, init_from=None, progress: bool = False
+):
     """SGD on ``train`` (TensorData) until ``budget_s`` seconds or ``max_steps`` steps have
     passed, at most ``run.train.epochs`` epochs, constant lr; (model in eval mode, info dict:
     steps, images seen, epochs (fraction), minutes)."""
@@ -52,8 +53,13 @@ def train_budgeted(run, train, budget_s: float, max_steps: float, init_from=None
     model, optimizer, _, _ = build(run, init_from)
     loss_fn, views = make_loss(run, train), views_of(run)
     steps, images, t0 = 0, 0, time.perf_counter()
-    bar = tqdm(total=round(budget_s), disable=not progress, leave=False, unit="s",
-               desc=f"{run.model.arch} {run.model.input_size}")  # fmt: skip
+    bar = tqdm(
+        total=round(budget_s),
+        disable=not progress,
+        leave=False,
+        unit="s",
+        desc=f"{run.model.arch} {run.model.input_size}",
+    )
     model.train()
     for items in batches(run, len(train.y) * len(views)):
         if steps >= max_steps or time.perf_counter() - t0 >= budget_s:
@@ -63,8 +69,12 @@ def train_budgeted(run, train, budget_s: float, max_steps: float, init_from=None
         steps, images = steps + 1, images + len(y)
         bar.update(min(round(time.perf_counter() - t0), bar.total) - bar.n)
     bar.close()
-    info = {"steps": steps, "images": images, "epochs": images / (len(train.y) * len(views)),
-            "minutes": (time.perf_counter() - t0) / 60}  # fmt: skip
+    info = {
+        "steps": steps,
+        "images": images,
+        "epochs": images / (len(train.y) * len(views)),
+        "minutes": (time.perf_counter() - t0) / 60,
+    }
     return model.eval(), info
 
 
@@ -101,13 +111,18 @@ class Runner:
             return model_from_checkpoint(ckpt)[0], f"given checkpoint ({ckpt['epoch']} epochs)"
         run, path = variant_run(v, self.s), self.models_dir / v.key / "best.pt"
         init = self.mains.get(v.task) if v.warm and self.s.warm_start else None
-        budget = {"budget_min": self.s.budget_min, "max_steps": self.s.max_steps,
-                  "max_train": self.s.max_train, "init": None if init is None else str(init)}
+        budget = {
+            "budget_min": self.s.budget_min,
+            "max_steps": self.s.max_steps,
+            "max_train": self.s.max_train,
+            "init": None if init is None else str(init),
+        }
         model, info = self._reuse(path, run, budget) or self._train(v, run, path, budget, init)
         self.mains.setdefault(v.task, path)
         start = "" if init is None else ", from the main model"
-        return model, (f"{info['minutes']:.1f} min: {info['steps']} steps, "
-                       f"{info['epochs']:.2f} epochs{start}")  # fmt: skip
+        return model, (
+            f"{info['minutes']:.1f} min: {info['steps']} steps, {info['epochs']:.2f} epochs{start}"
+        )
 
     def _reuse(self, path: Path, run, budget: dict):
         from learn.checkpoint import inputs_stale, load_checkpoint, model_from_checkpoint
@@ -119,8 +134,10 @@ class Runner:
         if ckpt.get("budget") != budget or ckpt["config"] != to_dict(run):
             return None
         if inputs_stale(ckpt, run.task):
-            print(f"retraining {path}: a segmenter trained before its inputs kept their labels' "
-                  "support (learn.inputs)")
+            print(
+                f"retraining {path}: a segmenter trained before its inputs kept their labels' "
+                "support (learn.inputs)"
+            )
             return None
         print(f"reusing {path}")
         return model_from_checkpoint(ckpt)[0], ckpt["training"]
@@ -130,11 +147,24 @@ class Runner:
         from tactile.config import to_dict
 
         max_steps = self.s.max_steps or float("inf")
-        model, info = train_budgeted(run, self.tensors("train", v.task, v.size),
-                                     60 * self.s.budget_min, max_steps, init, self.progress)
-        ckpt = make_checkpoint(model, to_dict(run), epoch=int(np.ceil(info["epochs"])),
-                               best_metric=float("nan"), budget=budget, training=info,
-                               task=run.task, seed=run.train.seed)  # fmt: skip
+        model, info = train_budgeted(
+            run,
+            self.tensors("train", v.task, v.size),
+            60 * self.s.budget_min,
+            max_steps,
+            init,
+            self.progress,
+        )
+        ckpt = make_checkpoint(
+            model,
+            to_dict(run),
+            epoch=int(np.ceil(info["epochs"])),
+            best_metric=float("nan"),
+            budget=budget,
+            training=info,
+            task=run.task,
+            seed=run.train.seed,
+        )
         save_checkpoint(ckpt, path)
         return model, info
 
@@ -149,11 +179,18 @@ class Runner:
         from learn.models import count_parameters
 
         model, training = self.model(v)
-        res = measure(model, self.tensors("test", v.task, v.size), v.task, v.size,
-                      self.s.time_runs)  # fmt: skip
-        row = {"name": v.name, "arch": v.arch, "task": v.task, "width": v.width,
-               "size": list(v.size), "params": count_parameters(model), "training": training,
-               "resize_ms": self.resize_ms(v.size), **res}  # fmt: skip
+        res = measure(model, self.tensors("test", v.task, v.size), v.task, v.size, self.s.time_runs)
+        row = {
+            "name": v.name,
+            "arch": v.arch,
+            "task": v.task,
+            "width": v.width,
+            "size": list(v.size),
+            "params": count_parameters(model),
+            "training": training,
+            "resize_ms": self.resize_ms(v.size),
+            **res,
+        }
         return row, model
 
 
@@ -167,10 +204,15 @@ def measure(model, test, task: str, size: tuple[int, int], runs: int) -> dict:
     ref = evaluate_tensors(model, test, n_cls).metrics["accuracy"] if task == "classify" else None
     fast, res = scored_fast_path(lambda **kw: fast_inference(model, **kw), test, n_cls, ref)
     key = "accuracy" if task == "classify" else "mean_iou"
-    return {"metrics": res.metrics, "score": res.metrics[key], "cm": res.cm.tolist(),
-            "n_test": len(test.y), "bf16": bool(getattr(fast, "bf16", False)),
-            "ms_eval": cpu_ms_per_image(model, size, 1, runs),
-            "ms_fast": cpu_ms_per_image(fast, size, 1, runs)}  # fmt: skip
+    return {
+        "metrics": res.metrics,
+        "score": res.metrics[key],
+        "cm": res.cm.tolist(),
+        "n_test": len(test.y),
+        "bf16": bool(getattr(fast, "bf16", False)),
+        "ms_eval": cpu_ms_per_image(model, size, 1, runs),
+        "ms_fast": cpu_ms_per_image(fast, size, 1, runs),
+    }
 
 
 def resize_ms(data: Path, size: tuple[int, int], runs: int = 20) -> float:
@@ -207,8 +249,16 @@ def median_ms(call: Callable[[int], object], n: int) -> float:
     return 1e3 * float(np.median(times))
 
 
-def classic_row(name: str, arch: str, predict: Callable, test, size: tuple[int, int],
-                params: int, runner: Runner, training: str) -> dict:  # fmt: skip
+def classic_row(
+    name: str,
+    arch: str,
+    predict: Callable,
+    test,
+    size: tuple[int, int],
+    params: int,
+    runner: Runner,
+    training: str,
+) -> dict:
     """Result row of a non-network-only classifier: ``predict(x (B, 1, h, w)) -> (B,) labels``."""
     import torch
 
@@ -217,15 +267,28 @@ def classic_row(name: str, arch: str, predict: Callable, test, size: tuple[int, 
 
     cm = M.confusion_matrix(test.y, torch.as_tensor(np.asarray(predict(test.x))), 2)
     ms = median_ms(lambda i: predict(test.x[i : i + 1]), min(runner.s.time_runs, len(test.y)))
-    return {"name": name, "arch": arch, "task": "classify", "width": None, "size": list(size),
-            "params": int(params), "training": training, "metrics": scores(cm),
-            "score": scores(cm)["accuracy"], "cm": cm.tolist(), "n_test": len(test.y),
-            "bf16": False, "ms_eval": ms, "ms_fast": ms,
-            "resize_ms": runner.resize_ms(size)}  # fmt: skip
+    return {
+        "name": name,
+        "arch": arch,
+        "task": "classify",
+        "width": None,
+        "size": list(size),
+        "params": int(params),
+        "training": training,
+        "metrics": scores(cm),
+        "score": scores(cm)["accuracy"],
+        "cm": cm.tolist(),
+        "n_test": len(test.y),
+        "bf16": False,
+        "ms_eval": ms,
+        "ms_fast": ms,
+        "resize_ms": runner.resize_ms(size),
+    }
 
 
-def classic_rows(runner: Runner, size: tuple[int, int], vgg: tuple[float, object] | None
-                 ) -> list[dict]:  # fmt: skip
+def classic_rows(
+    runner: Runner, size: tuple[int, int], vgg: tuple[float, object] | None
+) -> list[dict]:
     """BoVW (80 words, SIFT) and, given ``(width, VGG16 classifier)``, its fc7 features + linear
     SVM (C = 0.25), both fitted on the train split at ``size``; the times include feature
     extraction."""
@@ -237,18 +300,39 @@ def classic_rows(runner: Runner, size: tuple[int, int], vgg: tuple[float, object
     train = runner.tensors("train", "classify", size)
     test = runner.tensors("test", "classify", size)
     t0 = time.perf_counter()
-    bovw = BagOfVisualWords(BovwConfig(seed=runner.s.seed)).fit(train.x[:, 0].numpy(),
-                                                                train.y.numpy())  # fmt: skip
+    bovw = BagOfVisualWords(BovwConfig(seed=runner.s.seed)).fit(
+        train.x[:, 0].numpy(), train.y.numpy()
+    )
     params = sum(bovw.to_arrays()[1][k].size for k in ("vocabulary", *SVM_ARRAYS))
     fitted = f"fitted in {(time.perf_counter() - t0) / 60:.1f} min"
-    rows = [classic_row("BoVW (80 words)", "bovw", lambda x: bovw.predict(x[:, 0].numpy()),
-                        test, size, params, runner, fitted)]  # fmt: skip
+    rows = [
+        classic_row(
+            "BoVW (80 words)",
+            "bovw",
+            lambda x: bovw.predict(x[:, 0].numpy()),
+            test,
+            size,
+            params,
+            runner,
+            fitted,
+        )
+    ]
     if vgg is not None:
         width, model = vgg
         t0 = time.perf_counter()
         svm = VggSvmClassifier(model, seed=runner.s.seed).fit(train.x, train.y.numpy())
         params = count_parameters(model) + sum(svm.to_arrays()[1][k].size for k in SVM_ARRAYS)
         fitted = f"SVM fitted in {(time.perf_counter() - t0) / 60:.1f} min on VGG16 w{width:g}"
-        rows.append(classic_row(f"VGG16 w{width:g} + SVM", "vgg_svm", svm.predict, test, size,
-                                params, runner, fitted))  # fmt: skip
+        rows.append(
+            classic_row(
+                f"VGG16 w{width:g} + SVM",
+                "vgg_svm",
+                svm.predict,
+                test,
+                size,
+                params,
+                runner,
+                fitted,
+            )
+        )
     return rows

@@ -1,9 +1,9 @@
 """The report folder every experiment writes: ``report.md``, ``results.json`` and charts.
 
-    rep = Report("robustness-a", out_dir, seed=0, config={"n_patterns": 10})
-    rep.section("Classification", markdown_table(["N_s", "r (mm)", "acc %"], rows))
-    rep.figure(fig, "heatmap_accuracy.png", "Accuracy over (N_s, r)")
-    rep.write(results)   # report.md + results.json, with command, seed, config, versions
+rep = Report("robustness-a", out_dir, seed=0, config={"n_patterns": 10})
+rep.section("Classification", markdown_table(["N_s", "r (mm)", "acc %"], rows))
+rep.figure(fig, "heatmap_accuracy.png", "Accuracy over (N_s, r)")
+rep.write(results)   # report.md + results.json, with command, seed, config, versions
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import numpy as np
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
     """A GitHub markdown table; floats with 2 decimals, ``None`` as "unknown"."""
+
     def cell(v: object) -> str:
         if v is None:
             return "unknown"
@@ -77,17 +78,31 @@ class Report:
         minutes = (time.perf_counter() - self.started) / 60
         vers = versions()
         head = [
-            f"# Experiment: {self.name}", "",
+            f"# Experiment: {self.name}",
+            "",
             f"Command: `{shlex.join(['handskin', *sys.argv[1:]])}`  ",
             f"Seed: {self.seed}. Wall time: {minutes:.1f} min on this machine.  ",
-            "Versions: " + ", ".join(f"{k} {v}" for k, v in vers.items()) + ".", "",
-            "Configuration:", "", "```json", json.dumps(_plain(self.config), indent=1), "```", "",
+            "Versions: " + ", ".join(f"{k} {v}" for k, v in vers.items()) + ".",
+            "",
+            "Configuration:",
+            "",
+            "```json",
+            json.dumps(_plain(self.config), indent=1),
+            "```",
+            "",
             "Numbers marked *paper* are Albini & Cannata (IJRR 2020); *unknown* marks a cell of "
-            "the paper's table we do not have.", "",
-        ]  # fmt: skip
+            "the paper's table we do not have.",
+            "",
+        ]
         path = self.out_dir / "report.md"
         path.write_text("\n".join(head) + "\n" + "\n".join(self.parts))
-        payload = {"name": self.name, "seed": self.seed, "config": self.config,
-                   "versions": vers, "wall_time_min": minutes, "results": results}  # fmt: skip
+        payload = {
+            "name": self.name,
+            "seed": self.seed,
+            "config": self.config,
+            "versions": vers,
+            "wall_time_min": minutes,
+            "results": results,
+        }
         (self.out_dir / "results.json").write_text(json.dumps(_plain(payload), indent=1))
         return path

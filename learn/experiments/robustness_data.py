@@ -74,9 +74,13 @@ def _check_counts(n_classify: int | None, n_segment: int) -> None:
 
 
 def load_frames(
-    path: str | Path, split: str = "test", *, n_classify: int | None = None,
-    n_segment: int = 0, seed: int = 0,
-) -> Frames:  # fmt: skip
+    path: str | Path,
+    split: str = "test",
+    *,
+    n_classify: int | None = None,
+    n_segment: int = 0,
+    seed: int = 0,
+) -> Frames:
     """Read a split's frames: pressures from raw readings, labels, and the chosen subsets.
 
     n_classify : samples classified (seeded subset; None = all). n_segment : hand samples
@@ -87,8 +91,10 @@ def load_frames(
     need = ["is_hand"] + (["taxel_label"] if n_segment else [])
     missing = [f for f in need if f not in reader.fields]
     if missing:
-        raise DataError(f"{reader.path} has no {missing}; robustness needs them. "
-                        "Fix: a dataset with hand labels (generated, or ingested with --labels)")
+        raise DataError(
+            f"{reader.path} has no {missing}; robustness needs them. "
+            "Fix: a dataset with hand labels (generated, or ingested with --labels)"
+        )
     with reader:
         ids = np.asarray(reader.splits.get(split, []), dtype=np.int64)
         if len(ids) == 0:
@@ -107,9 +113,18 @@ def load_frames(
     pos = {r: i for i, r in enumerate(rows)}
     seg_rows = np.array([pos[r] for r in seg], dtype=np.int64)
     truth = label_images(reader.map, p[seg_rows], labels[seg_rows])
-    return Frames(reader.map, reader.layout, ids[rows], p, is_hand_all[rows], labels,
-                  np.array([pos[r] for r in clf], dtype=np.int64), seg_rows, truth,
-                  len(ids))  # fmt: skip
+    return Frames(
+        reader.map,
+        reader.layout,
+        ids[rows],
+        p,
+        is_hand_all[rows],
+        labels,
+        np.array([pos[r] for r in clf], dtype=np.int64),
+        seg_rows,
+        truth,
+        len(ids),
+    )
 
 
 def read_rows(reader: DatasetReader, ids: np.ndarray) -> dict[str, np.ndarray]:
@@ -122,8 +137,10 @@ def read_rows(reader: DatasetReader, ids: np.ndarray) -> dict[str, np.ndarray]:
     n = raw.shape[1]
     has_labels = "taxel_label" in reader.fields
     labels = reader.taxel_label[sorted_ids][back] if has_labels else np.zeros((len(ids), n))
-    return {"pressure": reader.pressure_from_raw(raw, time_s),
-            "taxel_label": labels.astype(np.uint8)}  # fmt: skip
+    return {
+        "pressure": reader.pressure_from_raw(raw, time_s),
+        "taxel_label": labels.astype(np.uint8),
+    }
 
 
 def label_images(tmap: TactileMap, p: np.ndarray, labels: np.ndarray) -> np.ndarray:
@@ -142,8 +159,9 @@ def images(tmap: TactileMap, p: np.ndarray) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros((0, *tmap.shape), np.uint8)
 
 
-def net_inputs(images_u8: np.ndarray, size: tuple[int, int], task: str,
-               canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
+def net_inputs(
+    images_u8: np.ndarray, size: tuple[int, int], task: str, canvas: tuple[int, int] | None = None
+) -> np.ndarray:
     """Network inputs (B, 1, h, w) float32 in [0, 1] of ``task``'s networks from images
     (B, H, W) uint8, made as ``learn.data.TorchTactileDataset`` makes them (`learn.inputs`;
     ``canvas``: (H', W') map pixels of the model's canvas, or None)."""
@@ -151,8 +169,9 @@ def net_inputs(images_u8: np.ndarray, size: tuple[int, int], task: str,
     return net_input(x, tuple(size), task, canvas)[:, None] if len(x) else x[:, None, :0, :0]
 
 
-def net_labels(labels: np.ndarray, size: tuple[int, int],
-               canvas: tuple[int, int] | None = None) -> np.ndarray:  # fmt: skip
+def net_labels(
+    labels: np.ndarray, size: tuple[int, int], canvas: tuple[int, int] | None = None
+) -> np.ndarray:
     """Label images (B, H, W) at the network's (h, w) (on its canvas, then nearest
     neighbour; `learn.inputs.net_labels`), int64."""
     return inputs.net_labels(labels, tuple(size), canvas).astype(np.int64)
@@ -182,5 +201,9 @@ def stored_agreement(path: str | Path, frames: Frames) -> dict[str, float]:
         o = np.argsort(seg_ids)
         stored_lbl = reader.label_image[seg_ids[o]] if len(o) else frames.label_image
         lbl_diff = float((stored_lbl != frames.label_image[o]).mean()) if len(o) else 0.0
-    return {"identical_images": same / len(ids), "differing_pixels": diff_px / n_px,
-            "max_grey_difference": max_diff, "differing_label_pixels": lbl_diff}  # fmt: skip
+    return {
+        "identical_images": same / len(ids),
+        "differing_pixels": diff_px / n_px,
+        "max_grey_difference": max_diff,
+        "differing_label_pixels": lbl_diff,
+    }

@@ -66,8 +66,10 @@ class Predictor:
         self.canvas_mm = run.model.canvas_mm  # (H, W) mm or None (ModelConfig.canvas_mm)
         want = 2 if self.task == "classify" else 7
         if self.num_classes != want:
-            raise ConfigError(f"{name}: a {self.task} network needs {want} classes for the "
-                              f"robustness tests, this one has {self.num_classes}")  # fmt: skip
+            raise ConfigError(
+                f"{name}: a {self.task} network needs {want} classes for the "
+                f"robustness tests, this one has {self.num_classes}"
+            )
 
     @classmethod
     def load(cls, name: str, path, fast: bool = True) -> Predictor:
@@ -95,8 +97,12 @@ def fast_path_agreement(frames: Frames, models: Sequence[Predictor], n: int = 25
     out = {}
     for m in models:
         rows = (frames.classify if m.task == "classify" else frames.segment)[:n]
-        x = net_inputs(frames.tmap.image(frames.pressure_pa[rows]), m.size, m.task,
-                       m.canvas(frames.tmap.step_mm))  # fmt: skip
+        x = net_inputs(
+            frames.tmap.image(frames.pressure_pa[rows]),
+            m.size,
+            m.task,
+            m.canvas(frames.tmap.step_mm),
+        )
         out[m.name] = float((m.predict(x) == m.predict(x, eval_mode=True)).mean())
     return out
 
@@ -111,8 +117,9 @@ class Outputs:
     seg_images: np.ndarray
 
 
-def _predict_all(images: np.ndarray, models: Sequence[Predictor],
-                 step_mm: float) -> dict[str, np.ndarray]:  # fmt: skip
+def _predict_all(
+    images: np.ndarray, models: Sequence[Predictor], step_mm: float
+) -> dict[str, np.ndarray]:
     """Every model's predictions for images (B, H, W) uint8 on a ``step_mm`` grid; inputs made
     once per size, task and canvas."""
     out, inputs = {}, {}
@@ -124,8 +131,9 @@ def _predict_all(images: np.ndarray, models: Sequence[Predictor],
     return out
 
 
-def run_rows(tmap, p: np.ndarray, is_clf: np.ndarray, is_seg: np.ndarray,
-             models: Sequence[Predictor]) -> Outputs:  # fmt: skip
+def run_rows(
+    tmap, p: np.ndarray, is_clf: np.ndarray, is_seg: np.ndarray, models: Sequence[Predictor]
+) -> Outputs:
     """Image frames p (B, N) Pa through ``tmap`` and run the classifiers on rows ``is_clf``
     (B,) bool and the segmenters on rows ``is_seg`` (B,) bool, ``CHUNK`` frames at a time."""
     clfs = [m for m in models if m.task == "classify"]
@@ -134,8 +142,13 @@ def run_rows(tmap, p: np.ndarray, is_clf: np.ndarray, is_seg: np.ndarray,
     for s in range(0, len(p), CHUNK):
         images = tmap.image(p[s : s + CHUNK])
         c, g = is_clf[s : s + CHUNK], is_seg[s : s + CHUNK]
-        parts.append((_predict_all(images[c], clfs, tmap.step_mm),
-                      _predict_all(images[g], segs, tmap.step_mm), images[g]))  # fmt: skip
+        parts.append(
+            (
+                _predict_all(images[c], clfs, tmap.step_mm),
+                _predict_all(images[g], segs, tmap.step_mm),
+                images[g],
+            )
+        )
     seg_images = np.concatenate([q[2] for q in parts]) if parts else np.zeros((0, *tmap.shape))
     return Outputs(_join(parts, 0, clfs), _join(parts, 1, segs), seg_images.astype(np.uint8))
 
@@ -143,8 +156,9 @@ def run_rows(tmap, p: np.ndarray, is_clf: np.ndarray, is_seg: np.ndarray,
 def _join(parts: list, i: int, models: Sequence[Predictor]) -> dict[str, np.ndarray]:
     """Concatenate the chunks' predictions of each model (empty arrays when there are none)."""
     empty = np.zeros((0, 1, 1, 1), np.float32)
-    return {m.name: np.concatenate([q[i][m.name] for q in parts] or [m.predict(empty)])
-            for m in models}  # fmt: skip
+    return {
+        m.name: np.concatenate([q[i][m.name] for q in parts] or [m.predict(empty)]) for m in models
+    }
 
 
 def _masks(frames: Frames) -> tuple[np.ndarray, np.ndarray]:
@@ -178,9 +192,13 @@ def zero_corruption(frames: Frames, models: Sequence[Predictor]) -> tuple[Output
 
 
 def blind_spot_study(
-    frames: Frames, models: Sequence[Predictor], spots: Sequence[tuple[int, float]],
-    n_patterns: int, seed: int, progress: bool = False,
-) -> dict:  # fmt: skip
+    frames: Frames,
+    models: Sequence[Predictor],
+    spots: Sequence[tuple[int, float]],
+    n_patterns: int,
+    seed: int,
+    progress: bool = False,
+) -> dict:
     """Test A: for each (N_s, r mm) in ``spots``, ``n_patterns`` random spot patterns.
 
     Returns {"baseline": {model: cm}, "conditions": [{"n_spots", "radius_mm", "affected":
@@ -191,12 +209,22 @@ def blind_spot_study(
     conditions = []
     bar = tqdm(total=len(spots) * n_patterns, desc="Test A", disable=not progress)
     for n_spots, radius in spots:
-        cond = {"n_spots": int(n_spots), "radius_mm": float(radius), "affected": [],
-                "cm": {m.name: [] for m in models}}  # fmt: skip
+        cond = {
+            "n_spots": int(n_spots),
+            "radius_mm": float(radius),
+            "affected": [],
+            "cm": {m.name: [] for m in models},
+        }
         for k in range(n_patterns):
             rng = stream(seed, KEY_SPOTS, n_spots, round(radius * 1000), k)
-            cms, share = _spot_pattern_cms(frames, models, base, is_clf, is_seg,
-                                           spot_pattern(frames.tmap, n_spots, radius, rng))
+            cms, share = _spot_pattern_cms(
+                frames,
+                models,
+                base,
+                is_clf,
+                is_seg,
+                spot_pattern(frames.tmap, n_spots, radius, rng),
+            )
             cond["affected"].append(share)
             for name, cm in cms.items():
                 cond["cm"][name].append(cm)
@@ -214,8 +242,11 @@ def _spot_pattern_cms(frames, models, base: Outputs, is_clf, is_seg, pattern) ->
     p = zero_taxels(frames.pressure_pa[rows], blind)
     new = run_rows(frames.tmap, p, is_clf[rows], is_seg[rows], models)
     hit_clf, hit_seg = hit[frames.classify], hit[frames.segment]
-    out = Outputs({k: v.copy() for k, v in base.clf.items()},
-                  {k: v.copy() for k, v in base.seg.items()}, base.seg_images)  # fmt: skip
+    out = Outputs(
+        {k: v.copy() for k, v in base.clf.items()},
+        {k: v.copy() for k, v in base.seg.items()},
+        base.seg_images,
+    )
     for name in out.clf:
         out.clf[name][hit_clf] = new.clf[name]
     for name in out.seg:
@@ -230,9 +261,13 @@ def _spot_pattern_cms(frames, models, base: Outputs, is_clf, is_seg, pattern) ->
 
 
 def removal_study(
-    frames: Frames, models: Sequence[Predictor], fractions: Sequence[float],
-    n_patterns: int, seed: int, progress: bool = False,
-) -> dict:  # fmt: skip
+    frames: Frames,
+    models: Sequence[Predictor],
+    fractions: Sequence[float],
+    n_patterns: int,
+    seed: int,
+    progress: bool = False,
+) -> dict:
     """Test B: ``n_patterns`` nested random removals, each at every fraction in ``fractions``
     (0 means the dataset's own map, the same for every pattern), the map rebuilt each time.
 
@@ -241,8 +276,16 @@ def removal_study(
     """
     is_clf, is_seg = _masks(frames)
     n = frames.tmap.n_taxels
-    conds = [{"fraction": float(f), "n_kept": [], "discarded_px": [], "hand_px": [],
-              "cm": {m.name: [] for m in models}} for f in fractions]  # fmt: skip
+    conds = [
+        {
+            "fraction": float(f),
+            "n_kept": [],
+            "discarded_px": [],
+            "hand_px": [],
+            "cm": {m.name: [] for m in models},
+        }
+        for f in fractions
+    ]
     done: dict[float, tuple] = {}
     bar = tqdm(total=len(fractions) * n_patterns, desc="Test B", disable=not progress)
     for k in range(n_patterns):
@@ -253,8 +296,11 @@ def removal_study(
                 removed = rebuild(frames.tmap, frames.layout, keep, f)
                 out = run_rows(removed.tmap, frames.pressure_pa[:, keep], is_clf, is_seg, models)
                 truth = warp_labels(frames.label_image, removed)
-                done[f] = (len(keep), *discarded_hand_pixels(frames.label_image, removed),
-                           _cms(out, frames, models, truth))  # fmt: skip
+                done[f] = (
+                    len(keep),
+                    *discarded_hand_pixels(frames.label_image, removed),
+                    _cms(out, frames, models, truth),
+                )
             n_kept, lost, total, cms = done[f]
             cond["n_kept"].append(n_kept)
             cond["discarded_px"].append(lost)
@@ -275,8 +321,12 @@ def scores_pct(cm: list, task: str) -> dict[str, float]:
 def spread(values: Sequence[float]) -> dict[str, float]:
     """mean, sd (over patterns, ddof 0), min and max of a list of numbers."""
     v = np.asarray(values, dtype=np.float64)
-    return {"mean": float(v.mean()), "sd": float(v.std()), "min": float(v.min()),
-            "max": float(v.max())}  # fmt: skip
+    return {
+        "mean": float(v.mean()),
+        "sd": float(v.std()),
+        "min": float(v.min()),
+        "max": float(v.max()),
+    }
 
 
 def summarize(cms: Sequence[list], task: str) -> dict[str, dict[str, float]]:

@@ -82,9 +82,14 @@ def removal_pool(tmap: TactileMap, layout, mix: FaultMix, seed: int) -> list[Rem
 
 
 def faulty_copy(
-    p: np.ndarray, labels: np.ndarray | None, tmap: TactileMap, module_ids: np.ndarray | None,
-    pool: list[RemovedMap], mix: FaultMix, rng: np.random.Generator,
-) -> tuple[np.ndarray, np.ndarray | None]:  # fmt: skip
+    p: np.ndarray,
+    labels: np.ndarray | None,
+    tmap: TactileMap,
+    module_ids: np.ndarray | None,
+    pool: list[RemovedMap],
+    mix: FaultMix,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray | None]:
     """(image (H', W') uint8, label image (H', W') uint8 or None) of one frame p (N,) Pa with
     random faults; ``labels`` (N,) taxel classes, None for classification."""
     spot_px = None
@@ -108,9 +113,15 @@ def faulty_copy(
 
 
 def faulty_copies(
-    path: str | Path, ids: np.ndarray, task: str, size: tuple[int, int], copies: int,
-    mix: FaultMix, seed: int, canvas_mm: tuple[float, float] | None = None,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    path: str | Path,
+    ids: np.ndarray,
+    task: str,
+    size: tuple[int, int],
+    copies: int,
+    mix: FaultMix,
+    seed: int,
+    canvas_mm: tuple[float, float] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """(x (copies * S, 1, h, w) float32, y (copies * S,) or (copies * S, h, w) int64) of
     dataset samples ``ids`` (S,), copy-major; ``canvas_mm``: the model's input canvas."""
     reader = DatasetReader(path)
@@ -125,8 +136,9 @@ def faulty_copies(
         for i, sample in enumerate(ids):
             rng = stream(seed, KEY_COPIES, c, int(sample))
             labels = rows["taxel_label"][i] if segment else None
-            image, truth = faulty_copy(rows["pressure"][i], labels, tmap, layout.module_ids,
-                                       pool, mix, rng)  # fmt: skip
+            image, truth = faulty_copy(
+                rows["pressure"][i], labels, tmap, layout.module_ids, pool, mix, rng
+            )
             xs.append(net_inputs(image[None], size, task, canvas))
             ys.append(net_labels(truth[None], size, canvas) if segment else hand[i : i + 1])
     if not xs:
@@ -134,8 +146,15 @@ def faulty_copies(
     return np.concatenate(xs), np.concatenate(ys)
 
 
-def augmented_data(path: str | Path, run, n_train: int | None, copies: int, mix: FaultMix,
-                   seed: int, progress: bool = True):  # fmt: skip
+def augmented_data(
+    path: str | Path,
+    run,
+    n_train: int | None,
+    copies: int,
+    mix: FaultMix,
+    seed: int,
+    progress: bool = True,
+):
     """``learn.folder.Data``: the (subset of the) train part's stored images followed by
     ``copies`` faulty copies of them, and the validation part likewise, so that the epoch
     kept is the best on clean and faulty images together."""
@@ -146,14 +165,20 @@ def augmented_data(path: str | Path, run, n_train: int | None, copies: int, mix:
         raise ConfigError(f"faulty copies must be >= 0, got {copies}")
     data, ids = split_data(path, run, n_train, seed, progress)
     size, canvas = run.model.input_size, run.model.canvas_mm
-    train = _with_copies(data.train, faulty_copies(path, ids["train"], run.task, size, copies,
-                                                   mix, seed, canvas))  # fmt: skip
+    train = _with_copies(
+        data.train, faulty_copies(path, ids["train"], run.task, size, copies, mix, seed, canvas)
+    )
     val = data.val
     if val is not None:
-        val = _with_copies(val, faulty_copies(path, ids["val"], run.task, size, copies, mix,
-                                              seed, canvas))  # fmt: skip
-    desc = {**data.description, "n_train": len(train.y), "n_val": 0 if val is None else
-            len(val.y), "faulty_copies": copies}  # fmt: skip
+        val = _with_copies(
+            val, faulty_copies(path, ids["val"], run.task, size, copies, mix, seed, canvas)
+        )
+    desc = {
+        **data.description,
+        "n_train": len(train.y),
+        "n_val": 0 if val is None else len(val.y),
+        "faulty_copies": copies,
+    }
     return Data(train, val, None, data.class_names, desc)
 
 
@@ -164,5 +189,6 @@ def _with_copies(clean, copies: tuple[np.ndarray, np.ndarray]):
     from learn.folder import TensorData
 
     x, y = copies
-    return TensorData(torch.cat([clean.x, torch.from_numpy(x)]),
-                      torch.cat([clean.y, torch.from_numpy(y)]))  # fmt: skip
+    return TensorData(
+        torch.cat([clean.x, torch.from_numpy(x)]), torch.cat([clean.y, torch.from_numpy(y)])
+    )

@@ -81,8 +81,9 @@ def rebuild(full: TactileMap, layout: TaxelLayout, keep: np.ndarray, fraction: f
     corners = keep[tmap.vertex_taxel[tmap.faces]]  # (M, 3) taxels of the full layout
     good = _same_shape(full.uv[corners], tmap.vertex_uv_mm[tmap.faces])
     source = _trace_back(full, tmap, corners, good)
-    pix = raster.locate_pixels(np.nan_to_num(full.uv), corners[good], full.origin_mm,
-                               full.shape, full.step_mm)[0]  # fmt: skip
+    pix = raster.locate_pixels(
+        np.nan_to_num(full.uv), corners[good], full.origin_mm, full.shape, full.step_mm
+    )[0]
     covered = np.zeros(full.shape[0] * full.shape[1], dtype=bool)
     covered[pix] = True
     full_cov = full.coverage().ravel()
@@ -93,8 +94,11 @@ def rebuilds_stored_map(tmap: TactileMap, layout: TaxelLayout) -> bool:
     """True when ``TactileMap.build(layout)`` at the map's step gives the map's own mesh and uv
     (so that maps rebuilt from subsets are made as the dataset's map was)."""
     again = TactileMap.build(layout, step_mm=tmap.step_mm)
-    return (again.shape == tmap.shape and np.array_equal(again.faces, tmap.faces)
-            and np.allclose(again.vertex_uv_mm, tmap.vertex_uv_mm, atol=1e-6))  # fmt: skip
+    return (
+        again.shape == tmap.shape
+        and np.array_equal(again.faces, tmap.faces)
+        and np.allclose(again.vertex_uv_mm, tmap.vertex_uv_mm, atol=1e-6)
+    )
 
 
 def _area(tri_uv: np.ndarray) -> np.ndarray:
@@ -113,8 +117,9 @@ def _same_shape(full_uv: np.ndarray, new_uv: np.ndarray) -> np.ndarray:
 
 def _trace_back(full: TactileMap, tmap: TactileMap, corners: np.ndarray, good: np.ndarray):
     """Full-map flat pixel under each rebuilt-map pixel centre (-1: not counted)."""
-    pix, face, w = raster.locate_pixels(tmap.vertex_uv_mm, tmap.faces, tmap.origin_mm,
-                                        tmap.shape, tmap.step_mm)  # fmt: skip
+    pix, face, w = raster.locate_pixels(
+        tmap.vertex_uv_mm, tmap.faces, tmap.origin_mm, tmap.shape, tmap.step_mm
+    )
     uv = np.einsum("pk,pkd->pd", w, np.nan_to_num(full.uv[corners[face]]))
     col = np.floor((uv[:, 0] - full.origin_mm[0]) / full.step_mm).astype(np.int64)
     row = np.floor((full.origin_mm[1] - uv[:, 1]) / full.step_mm).astype(np.int64)

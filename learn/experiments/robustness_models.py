@@ -49,8 +49,9 @@ class TrainPlan:
         if self.epochs is not None and self.epochs < 1:
             raise ConfigError(f"training epochs must be >= 1, got {self.epochs}")
         if min(n for n in (self.n_train, self.seg_n_train, 2) if n is not None) < 2:
-            raise ConfigError(f"training samples must be >= 2, got {self.n_train}, "
-                              f"{self.seg_n_train}")  # fmt: skip
+            raise ConfigError(
+                f"training samples must be >= 2, got {self.n_train}, {self.seg_n_train}"
+            )
 
     def samples(self, arch: str) -> int | None:
         """Train samples used for ``arch`` (None: all)."""
@@ -87,8 +88,15 @@ def split_data(path: str | Path, run, n_train: int | None, seed: int, progress: 
     """
     from learn.folder import Data, materialize, open_split, subset, validation_split
 
-    train_ds = open_split(Path(path), "train", run.task, run.model.input_size, None,
-                          run.train.seed, run.model.canvas_mm)  # fmt: skip
+    train_ds = open_split(
+        Path(path),
+        "train",
+        run.task,
+        run.model.input_size,
+        None,
+        run.train.seed,
+        run.model.canvas_mm,
+    )
     train_ds, val_ds = validation_split(train_ds, run.val_fraction, run.train.seed)
     rng = stream(seed, KEY_SUBSET, 1)
     if n_train is not None and n_train < len(train_ds.indices):
@@ -97,12 +105,19 @@ def split_data(path: str | Path, run, n_train: int | None, seed: int, progress: 
             n_val = max(n_train // 4, 1)
             val_ds = subset(val_ds, np.sort(rng.choice(len(val_ds.indices), n_val, False)))
     names = ("non_hand", "hand") if run.task == "classify" else _seg_names()
-    desc = {"path": str(path), "kind": "dataset", "n_train": len(train_ds),
-            "n_val": 0 if val_ds is None else len(val_ds), "n_test": 0}  # fmt: skip
+    desc = {
+        "path": str(path),
+        "kind": "dataset",
+        "n_train": len(train_ds),
+        "n_val": 0 if val_ds is None else len(val_ds),
+        "n_test": 0,
+    }
     val = None if val_ds is None else materialize(val_ds, "val", progress)
     data = Data(materialize(train_ds, "train", progress), val, None, names, desc)
-    ids = {"train": np.asarray(train_ds.indices, dtype=np.int64),
-           "val": np.asarray([] if val_ds is None else val_ds.indices, dtype=np.int64)}
+    ids = {
+        "train": np.asarray(train_ds.indices, dtype=np.int64),
+        "val": np.asarray([] if val_ds is None else val_ds.indices, dtype=np.int64),
+    }
     return data, ids
 
 
@@ -113,15 +128,31 @@ def _seg_names() -> tuple[str, ...]:
 
 
 def resolve_model(
-    arch: str, data: str | Path, models_dir: str | Path, checkpoint: str | Path | None,
-    plan: TrainPlan, seed: int, progress: bool = True,
-) -> Path:  # fmt: skip
+    arch: str,
+    data: str | Path,
+    models_dir: str | Path,
+    checkpoint: str | Path | None,
+    plan: TrainPlan,
+    seed: int,
+    progress: bool = True,
+) -> Path:
     """Path of a checkpoint of ``arch``: the given one, or one trained as ``plan`` says."""
     from learn.experiments.models import ensure_model, train_once
 
     if checkpoint is not None or dataclasses.replace(plan, device=FULL_PLAN.device) == FULL_PLAN:
-        return ensure_model(arch, data, models_dir, checkpoint=checkpoint, seed=seed,
-                            progress=progress, device=plan.device)  # fmt: skip
+        return ensure_model(
+            arch,
+            data,
+            models_dir,
+            checkpoint=checkpoint,
+            seed=seed,
+            progress=progress,
+            device=plan.device,
+        )
     out, run = Path(models_dir) / f"{arch}{plan.suffix}", plan_run(arch, plan, seed)
-    return train_once(out, run, lambda: split_data(data, run, plan.samples(arch), seed,
-                                                   progress)[0], progress=progress)[0]  # fmt: skip
+    return train_once(
+        out,
+        run,
+        lambda: split_data(data, run, plan.samples(arch), seed, progress)[0],
+        progress=progress,
+    )[0]

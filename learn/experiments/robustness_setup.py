@@ -40,8 +40,10 @@ class Scale:
 
     def __post_init__(self) -> None:
         if self.n_patterns < 1 or self.n_segment < 1:
-            raise ConfigError(f"patterns and segmented samples must be >= 1, got "
-                              f"{self.n_patterns} and {self.n_segment}")  # fmt: skip
+            raise ConfigError(
+                f"patterns and segmented samples must be >= 1, got "
+                f"{self.n_patterns} and {self.n_segment}"
+            )
         if self.n_classify is not None and self.n_classify < 1:
             raise ConfigError(f"classified test samples must be >= 1, got {self.n_classify}")
         if min(self.n_spots) < 0 or min(self.radii_mm) < 0:
@@ -49,21 +51,28 @@ class Scale:
         if not all(0.0 <= f < 1.0 for f in self.fractions):
             raise ConfigError(f"removed shares must lie in [0, 1), got {self.fractions}")
 
-    def changed(self, patterns: int | None, test_samples: int | None, seg_samples: int | None,
-                device: str | None = None) -> Scale:  # fmt: skip
+    def changed(
+        self,
+        patterns: int | None,
+        test_samples: int | None,
+        seg_samples: int | None,
+        device: str | None = None,
+    ) -> Scale:
         """A copy with the command line's counts and training device (None keeps a field)."""
         new = {"n_patterns": patterns, "n_classify": test_samples, "n_segment": seg_samples}
         plan = self.plan if device is None else dataclasses.replace(self.plan, device=device)
-        return dataclasses.replace(self, plan=plan,
-                                   **{k: v for k, v in new.items() if v is not None})
+        return dataclasses.replace(
+            self, plan=plan, **{k: v for k, v in new.items() if v is not None}
+        )
 
 
 FULL = Scale(n_patterns=10, n_classify=None, n_segment=200)
 QUICK = Scale(n_patterns=2, n_classify=300, n_segment=40, plan=QUICK_PLAN)
 
 
-def networks(data, models_dir: Path, scale: Scale, seed: int, classifier, segmenter,
-             progress: bool) -> tuple[list, list[dict]]:  # fmt: skip
+def networks(
+    data, models_dir: Path, scale: Scale, seed: int, classifier, segmenter, progress: bool
+) -> tuple[list, list[dict]]:
     """([classifier, segmenter] as Predictors, a description of each): given or trained."""
     from learn.checkpoint import load_checkpoint
     from learn.evaluate import ARCH_LABEL
@@ -76,9 +85,16 @@ def networks(data, models_dir: Path, scale: Scale, seed: int, classifier, segmen
         ckpt = load_checkpoint(path)
         pred = Predictor.load(ARCH_LABEL.get(ckpt["config"]["model"]["arch"], arch), path)
         out.append(pred)
-        info.append({"name": pred.name, "checkpoint": str(path), "given": given is not None,
-                     "epochs": ckpt["epoch"], "model": ckpt["config"]["model"],
-                     "data": ckpt.get("data")})  # fmt: skip
+        info.append(
+            {
+                "name": pred.name,
+                "checkpoint": str(path),
+                "given": given is not None,
+                "epochs": ckpt["epoch"],
+                "model": ckpt["config"]["model"],
+                "data": ckpt.get("data"),
+            }
+        )
     return out, info
 
 
@@ -89,8 +105,9 @@ def check_checkpoint(path, task: str) -> None:
 
     arch = load_checkpoint(path)["config"]["model"]["arch"]
     if TASK_OF_ARCH.get(arch) != task:
-        want = ("classifier (handsnet, vgg16)" if task == "classify"
-                else "segmenter (segnet, fcn16s)")  # fmt: skip
+        want = (
+            "classifier (handsnet, vgg16)" if task == "classify" else "segmenter (segnet, fcn16s)"
+        )
         raise ConfigError(f"{path} holds a {arch} network; give a {want} checkpoint")
 
 
@@ -101,7 +118,8 @@ def setup_markdown(data, frames, agreement: dict, info: list[dict], scale: Scale
         f"Dataset `{data}`: test split of {frames.n_split} samples; classification on "
         f"{'all ' if n_clf == frames.n_split else 'a fixed-seed subset of '}{n_clf}, "
         f"segmentation on a fixed-seed subset of {n_seg} test hand samples (both drawn from "
-        "--seed). Every pattern is drawn from --seed; its index is in results.json.", "",
+        "--seed). Every pattern is drawn from --seed; its index is in results.json.",
+        "",
         "Images are regenerated from the raw readings (`DatasetReader.pressure_from_raw`: "
         "baseline, drift and the generator's 3-sigma noise floor removed, over the nominal gain) "
         "through the corrupted map with `TactileMap.image`; label images with "
@@ -110,18 +128,24 @@ def setup_markdown(data, frames, agreement: dict, info: list[dict], scale: Scale
         f"identical, {100 * agreement['differing_pixels']:.3f} % of pixels differ (at most "
         f"{agreement['max_grey_difference']} grey levels), "
         f"{100 * agreement['differing_label_pixels']:.4f} % of label pixels differ."
-        + ("" if agreement["identical_images"] == 1.0 else DRIFT_NOTE), "",
-    ]  # fmt: skip
+        + ("" if agreement["identical_images"] == 1.0 else DRIFT_NOTE),
+        "",
+    ]
     fast = ", ".join(f"{k} {100 * v:.2f} %" for k, v in agreement.get("fast_path", {}).items())
-    lines += ["Networks run with batch norms folded into the convolutions (channels-last, "
-              "`learn.models.prepare_for_inference`), batches of 64 under `torch.no_grad`; their "
-              "predictions equal the eval-mode networks' on up to 256 regenerated test images "
-              f"(images or pixels): {fast}.", ""]  # fmt: skip
+    lines += [
+        "Networks run with batch norms folded into the convolutions (channels-last, "
+        "`learn.models.prepare_for_inference`), batches of 64 under `torch.no_grad`; their "
+        "predictions equal the eval-mode networks' on up to 256 regenerated test images "
+        f"(images or pixels): {fast}.",
+        "",
+    ]
     for m in info:
         how = "given" if m["given"] else f"trained here ({scale.plan})"
-        lines.append(f"- {m['name']}: `{m['checkpoint']}` ({how}; best epoch {m['epochs']}; "
-                     f"input {tuple(m['model']['input_size'])} px, width "
-                     f"{m['model'].get('width')})")  # fmt: skip
+        lines.append(
+            f"- {m['name']}: `{m['checkpoint']}` ({how}; best epoch {m['epochs']}; "
+            f"input {tuple(m['model']['input_size'])} px, width "
+            f"{m['model'].get('width')})"
+        )
     return "\n".join(lines)
 
 
@@ -138,8 +162,10 @@ def baseline_table(cms: dict, models) -> str:
     from learn.experiments.report import markdown_table
     from learn.experiments.robustness_eval import scores_pct
 
-    rows = [[m.name, ", ".join(f"{k} {v:.2f}" for k, v in scores_pct(cms[m.name], m.task).items())]
-            for m in models]  # fmt: skip
+    rows = [
+        [m.name, ", ".join(f"{k} {v:.2f}" for k, v in scores_pct(cms[m.name], m.task).items())]
+        for m in models
+    ]
     return markdown_table(["network", "scores (%)"], rows)
 
 
@@ -171,8 +197,17 @@ def check_inputs(data, classifier, segmenter, threads: int, device: str = "cpu")
             check_checkpoint(path, task)
 
 
-def prepare(data, out, scale: Scale, seed: int, classifier, segmenter, models_dir, threads: int,
-            progress: bool) -> Prepared:  # fmt: skip
+def prepare(
+    data,
+    out,
+    scale: Scale,
+    seed: int,
+    classifier,
+    segmenter,
+    models_dir,
+    threads: int,
+    progress: bool,
+) -> Prepared:
     """Load or train the networks and read the test frames (after :func:`check_inputs`)."""
     import torch
 
@@ -184,8 +219,9 @@ def prepare(data, out, scale: Scale, seed: int, classifier, segmenter, models_di
     tic = time.perf_counter()
     models, info = networks(data, models_dir, scale, seed, classifier, segmenter, progress)
     toc = time.perf_counter()
-    frames = load_frames(data, "test", n_classify=scale.n_classify, n_segment=scale.n_segment,
-                         seed=seed)  # fmt: skip
+    frames = load_frames(
+        data, "test", n_classify=scale.n_classify, n_segment=scale.n_segment, seed=seed
+    )
     agreement = stored_agreement(data, frames)
     agreement["fast_path"] = fast_path_agreement(frames, models)
     minutes = {"networks": (toc - tic) / 60, "frames": (time.perf_counter() - toc) / 60}
@@ -198,6 +234,10 @@ def timing_line(minutes: dict[str, float]) -> str:
 
 
 def config_of(data, scale: Scale, classifier, segmenter, threads: int) -> dict:
-    return {"data": str(data), "scale": dataclasses.asdict(scale), "threads": threads,
-            "classifier": None if classifier is None else str(classifier),
-            "segmenter": None if segmenter is None else str(segmenter)}  # fmt: skip
+    return {
+        "data": str(data),
+        "scale": dataclasses.asdict(scale),
+        "threads": threads,
+        "classifier": None if classifier is None else str(classifier),
+        "segmenter": None if segmenter is None else str(segmenter),
+    }

@@ -32,8 +32,12 @@ def finetune_key(run, init: Path | None, target: Path, samples: list[int]) -> di
     else:
         with open(init, "rb") as f:
             start = hashlib.file_digest(f, "sha256").hexdigest()
-    key = {"config": to_dict(run), "init": start,
-           "target": dataset, "samples": hashlib.sha256(json.dumps(samples).encode()).hexdigest()}
+    key = {
+        "config": to_dict(run),
+        "init": start,
+        "target": dataset,
+        "samples": hashlib.sha256(json.dumps(samples).encode()).hexdigest(),
+    }
     return json.loads(json.dumps(key))  # as it reads back from the file (tuples as lists)
 
 

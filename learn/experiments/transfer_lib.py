@@ -61,8 +61,10 @@ class TransferSettings:
         if min(self.finetune_epochs, self.pretrain_epochs, self.threads) < 1:
             raise ConfigError("finetune_epochs, pretrain_epochs and threads must be >= 1")
         if not (self.classification or self.segmentation):
-            raise ConfigError("neither classification nor segmentation is asked for. Fix: drop "
-                              "--no-classification or add --segmentation")  # fmt: skip
+            raise ConfigError(
+                "neither classification nor segmentation is asked for. Fix: drop "
+                "--no-classification or add --segmentation"
+            )
         if (self.precision, self.device) != ("fp32", "cpu"):  # unknown, or absent (imports torch)
             from learn.train import RunConfig, check_precision
 
@@ -96,12 +98,16 @@ def model_config(task: str, checkpoint: Path | None, s: TransferSettings):
     if checkpoint is not None:
         model = run_from_dict(load_checkpoint(checkpoint)["config"]).model
         if (model.arch in ("handsnet", "vgg16")) != (task == "classify"):
-            raise ConfigError(f"{checkpoint} is a {model.arch} checkpoint, not a "
-                              f"{'classifier' if task == 'classify' else 'segmenter'}")
+            raise ConfigError(
+                f"{checkpoint} is a {model.arch} checkpoint, not a "
+                f"{'classifier' if task == 'classify' else 'segmenter'}"
+            )
         if s.keep_scale and model.canvas_mm is not None:
-            raise ConfigError(f"{checkpoint} already centres its inputs on a {model.canvas_mm} "
-                              "mm canvas, so its 'forearm' rows keep its scale. Fix: drop "
-                              "--keep-scale")  # fmt: skip
+            raise ConfigError(
+                f"{checkpoint} already centres its inputs on a {model.canvas_mm} "
+                "mm canvas, so its 'forearm' rows keep its scale. Fix: drop "
+                "--keep-scale"
+            )
         return model
     return dataclasses.replace(preset_run(ARCH[task]).model, input_size=s.input_size)
 
@@ -128,13 +134,21 @@ def finetune_run(model, s: TransferSettings, scratch: bool):
     from learn.train import RunConfig
 
     train = dataclasses.replace(
-        C.FINETUNE_TEST_C, epochs=s.finetune_epochs, seed=s.seed,
+        C.FINETUNE_TEST_C,
+        epochs=s.finetune_epochs,
+        seed=s.seed,
         lr_drop_period_epochs=drop_epoch(s.finetune_epochs),
         loss=preset_run(model.arch).train.loss,
         lr_factors={} if scratch else C.FINETUNE_TEST_C.lr_factors,
-    )  # fmt: skip
-    return RunConfig(model=model, train=train, val_fraction=0.0, threads=s.threads,
-                     precision=s.precision, device=s.device)  # fmt: skip
+    )
+    return RunConfig(
+        model=model,
+        train=train,
+        val_fraction=0.0,
+        threads=s.threads,
+        precision=s.precision,
+        device=s.device,
+    )
 
 
 def pretrain_run(model, s: TransferSettings):
@@ -142,8 +156,14 @@ def pretrain_run(model, s: TransferSettings):
     from learn.experiments.models import preset_run
 
     run = preset_run(model.arch, epochs=s.pretrain_epochs, seed=s.seed)
-    return dataclasses.replace(run, model=model, flips=s.pretrain_flips, threads=s.threads,
-                               precision=s.precision, device=s.device)  # fmt: skip
+    return dataclasses.replace(
+        run,
+        model=model,
+        flips=s.pretrain_flips,
+        threads=s.threads,
+        precision=s.precision,
+        device=s.device,
+    )
 
 
 def held_out_instances(target: Path) -> np.ndarray:
@@ -170,23 +190,34 @@ def pretrain_data(pretrain: Path, target: Path, run, progress: bool):
     # positions in ds.indices (for segmentation, the hand samples only), not dataset rows
     keep = np.flatnonzero(~np.isin(inst[np.asarray(ds.indices)], held_out_instances(target)))
     train, val = validation_split(subset(ds, keep), run.val_fraction, run.train.seed)
-    desc = {"path": str(pretrain), "kind": "dataset", "n_train": len(train.indices),
-            "n_val": 0 if val is None else len(val.indices), "n_test": 0,
-            "n_dropped_shared_instances": len(ds.indices) - len(keep)}  # fmt: skip
-    return Data(materialize(train, "pretrain", progress),
-                None if val is None else materialize(val, "pretrain val", progress), None,
-                _class_names(train, run.task), desc)  # fmt: skip
+    desc = {
+        "path": str(pretrain),
+        "kind": "dataset",
+        "n_train": len(train.indices),
+        "n_val": 0 if val is None else len(val.indices),
+        "n_test": 0,
+        "n_dropped_shared_instances": len(ds.indices) - len(keep),
+    }
+    return Data(
+        materialize(train, "pretrain", progress),
+        None if val is None else materialize(val, "pretrain val", progress),
+        None,
+        _class_names(train, run.task),
+        desc,
+    )
 
 
-def synthetic_model(pretrain: Path, target: Path, model, models_dir: Path, s: TransferSettings,
-                    progress: bool) -> Path:  # fmt: skip
+def synthetic_model(
+    pretrain: Path, target: Path, model, models_dir: Path, s: TransferSettings, progress: bool
+) -> Path:
     """Checkpoint of the model trained on the synthetic end-effector set (reused when finished,
     resumed when stopped)."""
     from learn.experiments.models import train_once
 
     out, run = models_dir / f"ee-synthetic-{model.arch}", pretrain_run(model, s)
-    return train_once(out, run, lambda: pretrain_data(pretrain, target, run, progress),
-                      progress=progress)[0]  # fmt: skip
+    return train_once(
+        out, run, lambda: pretrain_data(pretrain, target, run, progress), progress=progress
+    )[0]
 
 
 def score(model_or_ckpt, test, num_classes: int) -> dict:
@@ -218,8 +249,15 @@ def target_data(target: Path, run, progress: bool):
     return data, hand, index
 
 
-def finetune(run, data, rows: np.ndarray, index: np.ndarray, init: Path | None,
-             progress: bool, cache: tuple[Path, Path] | None = None) -> dict:  # fmt: skip
+def finetune(
+    run,
+    data,
+    rows: np.ndarray,
+    index: np.ndarray,
+    init: Path | None,
+    progress: bool,
+    cache: tuple[Path, Path] | None = None,
+) -> dict:
     """Fine-tune on the train rows ``rows`` and score on data.test; ``samples``: the dataset
     indices trained on (``index[rows]``, sorted). ``cache`` = (result file, target dataset):
     the result is read from the file when it was computed for the same run, start, target and
@@ -231,42 +269,72 @@ def finetune(run, data, rows: np.ndarray, index: np.ndarray, init: Path | None,
     samples = np.sort(index[rows]).tolist()
 
     def compute() -> dict:
-        sub = Data(TensorData(data.train.x[rows], data.train.y[rows]), None, data.test,
-                   data.class_names, data.description)  # fmt: skip
+        sub = Data(
+            TensorData(data.train.x[rows], data.train.y[rows]),
+            None,
+            data.test,
+            data.class_names,
+            data.description,
+        )
         result = fit(run, sub, None, init_from=init, progress=progress)
         return score(result.model, data.test, run.model.num_classes) | {
-            "n": len(rows), "samples": samples}
+            "n": len(rows),
+            "samples": samples,
+        }
 
     if cache is None:
         return compute()
     return cached(cache[0], finetune_key(run, init, cache[1], samples), compute)
 
 
-def transfer_task(task: str, source: Path, target: Path, pretrain: Path, models_dir: Path,
-                  s: TransferSettings, checkpoint: Path | None, progress: bool) -> dict:
+def transfer_task(
+    task: str,
+    source: Path,
+    target: Path,
+    pretrain: Path,
+    models_dir: Path,
+    s: TransferSettings,
+    checkpoint: Path | None,
+    progress: bool,
+) -> dict:
     """Zero-shot, Test C fine-tuning and the learning curve of one task (see module doc)."""
     from learn.experiments.models import ensure_model
 
     model = model_config(task, checkpoint, s)
-    forearm = ensure_model(model.arch, source, models_dir, checkpoint=checkpoint,
-                           run=pretrain_run(model, s), name=f"forearm-{model.arch}",
-                           progress=progress)  # fmt: skip
+    forearm = ensure_model(
+        model.arch,
+        source,
+        models_dir,
+        checkpoint=checkpoint,
+        run=pretrain_run(model, s),
+        name=f"forearm-{model.arch}",
+        progress=progress,
+    )
     synthetic = synthetic_model(pretrain, target, model, models_dir, s, progress)
     run = finetune_run(model, s, scratch=False)
     data, hand, index = target_data(target, run, progress)
     n_cls, order = model.num_classes, nested_order(hand, s.seed)
-    out = {"model": dataclasses.asdict(model), "forearm_checkpoint": str(forearm),
-           "synthetic_checkpoint": str(synthetic), "n_train": len(hand),
-           "n_test": len(data.test.y), "class_names": list(data.class_names),
-           "zero_shot": {"forearm": score(forearm, data.test, n_cls),
-                         "synthetic EE": score(synthetic, data.test, n_cls)}}  # fmt: skip
+    out = {
+        "model": dataclasses.asdict(model),
+        "forearm_checkpoint": str(forearm),
+        "synthetic_checkpoint": str(synthetic),
+        "n_train": len(hand),
+        "n_test": len(data.test.y),
+        "class_names": list(data.class_names),
+        "zero_shot": {
+            "forearm": score(forearm, data.test, n_cls),
+            "synthetic EE": score(synthetic, data.test, n_cls),
+        },
+    }
     sizes = sorted({n for n in s.curve_sizes if n < len(hand)} | {len(hand)})
     inits = {"scratch": None, "forearm": forearm, "synthetic EE": synthetic}
+
     def cache(name: str, n: int) -> tuple[Path, Path]:
         return models_dir / "finetune" / f"{task}-{name.replace(' ', '_')}-{n}.json", target
 
-    out["finetuned"] = finetune(run, data, order, index, forearm, progress,
-                                cache("forearm", len(hand)))  # fmt: skip
+    out["finetuned"] = finetune(
+        run, data, order, index, forearm, progress, cache("forearm", len(hand))
+    )
     starts, scaled = {name: (inits[name], data) for name in INITS}, model
     if s.keep_scale:  # the same forearm weights, fed the target's images at the forearm's scale
         scaled = dataclasses.replace(model, canvas_mm=map_mm(source))
@@ -282,6 +350,7 @@ def transfer_task(task: str, source: Path, target: Path, pretrain: Path, models_
                 out["curve"][name].append(out["finetuned"])
                 continue
             ft = finetune_run(m, s, scratch=name == "scratch")
-            out["curve"][name].append(finetune(ft, d, order[:n], index, init, progress,
-                                               cache(name, n)))  # fmt: skip
+            out["curve"][name].append(
+                finetune(ft, d, order[:n], index, init, progress, cache(name, n))
+            )
     return out

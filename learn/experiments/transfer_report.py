@@ -20,11 +20,17 @@ from learn.experiments.transfer_lib import (
 )
 
 #: Segmentation scores of Tables 8, 15 and 16: (metric key, header).
-SEG_KEYS = (("pixel_accuracy", "Acc"), ("mean_accuracy", "mAcc"), ("mean_iou", "mIoU"),
-            ("fw_iou", "fwIoU"))  # fmt: skip
-ZERO_SHOT = {"forearm": "forearm model (source part)",
-             "synthetic EE": "synthetic end-effector model (generator)",
-             AT_SCALE: "forearm model at its scale (canvas)"}  # fmt: skip
+SEG_KEYS = (
+    ("pixel_accuracy", "Acc"),
+    ("mean_accuracy", "mAcc"),
+    ("mean_iou", "mIoU"),
+    ("fw_iou", "fwIoU"),
+)
+ZERO_SHOT = {
+    "forearm": "forearm model (source part)",
+    "synthetic EE": "synthetic end-effector model (generator)",
+    AT_SCALE: "forearm model at its scale (canvas)",
+}
 
 
 def _pct(value: float) -> float:
@@ -36,8 +42,11 @@ def scores_table(task: str, rows: list[tuple[str, dict]]) -> str:
     if task == "classify":
         head = ["model", "accuracy % (ours)", "accuracy % (paper)"]
         return markdown_table(head, [[n, _pct(r["metrics"]["accuracy"]), None] for n, r in rows])
-    head = ["model", *(f"{h} % (ours)" for _, h in SEG_KEYS),
-            *(f"{h} % (paper)" for _, h in SEG_KEYS)]  # fmt: skip
+    head = [
+        "model",
+        *(f"{h} % (ours)" for _, h in SEG_KEYS),
+        *(f"{h} % (paper)" for _, h in SEG_KEYS),
+    ]
     body = [[n, *(_pct(r["metrics"][k]) for k, _ in SEG_KEYS), *([None] * 4)] for n, r in rows]
     return markdown_table(head, body)
 
@@ -48,9 +57,10 @@ def confusions(rows: list[tuple[str, dict]], names: list[str]) -> str:
 
     from learn.eval_report import confusion_markdown
 
-    return "\n\n".join(f"{n}, % of each true class:\n\n"
-                       + confusion_markdown(torch.tensor(r["cm"]), tuple(names))
-                       for n, r in rows)  # fmt: skip
+    return "\n\n".join(
+        f"{n}, % of each true class:\n\n" + confusion_markdown(torch.tensor(r["cm"]), tuple(names))
+        for n, r in rows
+    )
 
 
 def curve_table(res: dict, key: str, what: str = "samples") -> str:
@@ -58,8 +68,9 @@ def curve_table(res: dict, key: str, what: str = "samples") -> str:
     N counts ("samples", "hand samples")."""
     sizes = [p["n"] for p in res["curve"]["scratch"]]
     inits = list(res["curve"])  # INITS, then AT_SCALE when asked for
-    body = [[n, *(_pct(res["curve"][i][k]["metrics"][key]) for i in inits)]
-            for k, n in enumerate(sizes)]  # fmt: skip
+    body = [
+        [n, *(_pct(res["curve"][i][k]["metrics"][key]) for i in inits)] for k, n in enumerate(sizes)
+    ]
     return markdown_table([f"N (EE train {what})", *(f"from {i} %" for i in inits)], body)
 
 
@@ -71,11 +82,21 @@ def curve_chart(res: dict, key: str, label: str, what: str = "samples"):
     ax = fig.subplots()
     for i, (name, points) in enumerate(res["curve"].items()):
         n = [p["n"] for p in points]
-        ax.plot(n, [_pct(p["metrics"][key]) for p in points], "os^D"[i] + "-", c=f"C{i}",
-                label=f"fine-tuned from {name} (ours)")  # fmt: skip
+        ax.plot(
+            n,
+            [_pct(p["metrics"][key]) for p in points],
+            "os^D"[i] + "-",
+            c=f"C{i}",
+            label=f"fine-tuned from {name} (ours)",
+        )
     for i, (name, r) in enumerate(res["zero_shot"].items()):
-        ax.axhline(_pct(r["metrics"][key]), c=f"C{i + 1}", ls="--", lw=1,
-                   label=f"{name} model, zero-shot (ours)")  # fmt: skip
+        ax.axhline(
+            _pct(r["metrics"][key]),
+            c=f"C{i + 1}",
+            ls="--",
+            lw=1,
+            label=f"{name} model, zero-shot (ours)",
+        )
     ax.set_xscale("log")
     sizes = [p["n"] for p in res["curve"]["scratch"]]
     ticks = ax.set_xticks(sizes, [str(n) for n in sizes])
@@ -84,8 +105,11 @@ def curve_chart(res: dict, key: str, label: str, what: str = "samples"):
             a.label1.set_horizontalalignment("right")
             b.label1.set_horizontalalignment("left")
     ax.minorticks_off()
-    ax.set(xlabel=f"end-effector training {what} N (log scale)", ylabel=f"test {label}, %",
-           title=f"Test C learning curve: {label} on the end-effector test split")
+    ax.set(
+        xlabel=f"end-effector training {what} N (log scale)",
+        ylabel=f"test {label}, %",
+        title=f"Test C learning curve: {label} on the end-effector test split",
+    )
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     return fig
@@ -96,9 +120,11 @@ def _scale_text(res: dict) -> str:
     if "canvas_mm" not in res:
         return ""
     h, w = res["canvas_mm"]
-    return (f" (the \"at its scale\" rows: each image first centred on a {h:g} × {w:g} mm "
-            "canvas, the forearm map's size, so one mm is as many input pixels as on the "
-            "forearm)")
+    return (
+        f' (the "at its scale" rows: each image first centred on a {h:g} × {w:g} mm '
+        "canvas, the forearm map's size, so one mm is as many input pixels as on the "
+        "forearm)"
+    )
 
 
 def write_task(rep, task: str, res: dict) -> None:
@@ -107,32 +133,52 @@ def write_task(rep, task: str, res: dict) -> None:
     key, label = ("accuracy", "accuracy") if task == "classify" else ("mean_iou", "mean IoU")
     what = "samples" if task == "classify" else "hand samples"  # segmentation: hands only
     zero = [(ZERO_SHOT[k], r) for k, r in res["zero_shot"].items()]
-    rep.section(f"{title}: zero-shot on the end-effector (paper: Table 15)",
-                f"{res['n_test']} end-effector test {what}, resized to "
-                f"{res['model']['input_size']} px{_scale_text(res)}.\n\n"
-                + scores_table(task, zero)
-                + "\n\n" + confusions(zero, res["class_names"]))  # fmt: skip
-    ft = [("forearm model, fine-tuned (Test C)", res["finetuned"]),
-          ("synthetic end-effector model, fine-tuned (Test C)", res["curve"]["synthetic EE"][-1]),
-          ("from scratch on end-effector data (Test C schedule)", res["curve"]["scratch"][-1])]
+    rep.section(
+        f"{title}: zero-shot on the end-effector (paper: Table 15)",
+        f"{res['n_test']} end-effector test {what}, resized to "
+        f"{res['model']['input_size']} px{_scale_text(res)}.\n\n"
+        + scores_table(task, zero)
+        + "\n\n"
+        + confusions(zero, res["class_names"]),
+    )
+    ft = [
+        ("forearm model, fine-tuned (Test C)", res["finetuned"]),
+        ("synthetic end-effector model, fine-tuned (Test C)", res["curve"]["synthetic EE"][-1]),
+        ("from scratch on end-effector data (Test C schedule)", res["curve"]["scratch"][-1]),
+    ]
     scaled = AT_SCALE in res["curve"]
     if scaled:
-        ft.insert(1, ("forearm model at its scale, fine-tuned (Test C)",
-                      res["curve"][AT_SCALE][-1]))  # fmt: skip
-    rep.section(f"{title}: fine-tuned on {res['n_train']} end-effector {what} (paper: Table 16)",
-                scores_table(task, ft) + "\n\n"
-                + confusions(ft[: 1 + scaled], res["class_names"]))  # fmt: skip
+        ft.insert(
+            1, ("forearm model at its scale, fine-tuned (Test C)", res["curve"][AT_SCALE][-1])
+        )
+    rep.section(
+        f"{title}: fine-tuned on {res['n_train']} end-effector {what} (paper: Table 16)",
+        scores_table(task, ft) + "\n\n" + confusions(ft[: 1 + scaled], res["class_names"]),
+    )
     rep.section(f"{title}: learning curve ({label} %)", curve_table(res, key, what))
-    rep.figure(curve_chart(res, key, label, what), f"curve_{task}.png",
-               f"Test {label} against the number of end-effector training {what}, fine-tuned "
-               f"with the Test C recipe from {len(res['curve'])} starting points; dashed: "
-               "zero-shot models. The paper's Test C numbers are unknown to us, so none is drawn.")
+    rep.figure(
+        curve_chart(res, key, label, what),
+        f"curve_{task}.png",
+        f"Test {label} against the number of end-effector training {what}, fine-tuned "
+        f"with the Test C recipe from {len(res['curve'])} starting points; dashed: "
+        "zero-shot models. The paper's Test C numbers are unknown to us, so none is drawn.",
+    )
 
 
-def run_transfer(source: str | Path, target: str | Path, pretrain: str | Path, out: str | Path,
-                 s: TransferSettings, *, classifier: str | Path | None = None,
-                 segmenter: str | Path | None = None, models_dir: str | Path | None = None,
-                 notes: str = "", config: dict | None = None, progress: bool = True) -> dict:
+def run_transfer(
+    source: str | Path,
+    target: str | Path,
+    pretrain: str | Path,
+    out: str | Path,
+    s: TransferSettings,
+    *,
+    classifier: str | Path | None = None,
+    segmenter: str | Path | None = None,
+    models_dir: str | Path | None = None,
+    notes: str = "",
+    config: dict | None = None,
+    progress: bool = True,
+) -> dict:
     """Run Test C for classification (unless ``s.classification`` is off) and segmentation (if
     asked or given); write ``out``/report.md, results.json, curve_*.png. Returns the results
     dict {task: ...}."""
@@ -144,9 +190,19 @@ def run_transfer(source: str | Path, target: str | Path, pretrain: str | Path, o
     for task, ckpt in tasks.items():  # checked before any work
         model_config(task, None if ckpt is None else Path(ckpt), s)
     rep = Report("transfer", out, seed=s.seed, config={**(config or {}), **dataclasses.asdict(s)})
-    results = {task: transfer_task(task, source, target, pretrain, models, s,
-                                   None if ckpt is None else Path(ckpt), progress)
-               for task, ckpt in tasks.items()}  # fmt: skip
+    results = {
+        task: transfer_task(
+            task,
+            source,
+            target,
+            pretrain,
+            models,
+            s,
+            None if ckpt is None else Path(ckpt),
+            progress,
+        )
+        for task, ckpt in tasks.items()
+    }
     rep.section("Setup", notes + recipe_text(s))
     for task, res in results.items():
         write_task(rep, task, res)
@@ -166,13 +222,24 @@ def recipe_text(s: TransferSettings) -> str:
         f"flips {'on' if s.pretrain_flips else 'off'}, best epoch on a subject-disjoint "
         "validation part. Curve subsets: nested, class-balanced random prefixes of the target's "
         "train split (subject- and instance-disjoint from its test split)."
-        + (" SegNet trains and is scored on hand samples only (a non-hand print has no parts), "
-           "so its counts are of hand samples." if s.segmentation else "")
-        + (" Every training forward pass here ran in bfloat16 autocast (weights, optimizer and "
-           "loss in float32; `--precision bf16`)." if s.precision == "bf16" else "") + (
+        + (
+            " SegNet trains and is scored on hand samples only (a non-hand print has no parts), "
+            "so its counts are of hand samples."
+            if s.segmentation
+            else ""
+        )
+        + (
+            " Every training forward pass here ran in bfloat16 autocast (weights, optimizer and "
+            "loss in float32; `--precision bf16`)."
+            if s.precision == "bf16"
+            else ""
+        )
+        + (
             "\n\n**Shortened run**: fewer epochs than the paper's 120 fine-tuning and the "
             "preset's 80 training epochs; networks this briefly trained stay near chance, so "
             "these scores test the pipeline, not the method. Run without --quick (or give "
             "--classifier / --segmenter) for meaningful numbers."
-            if s.finetune_epochs < 120 or s.pretrain_epochs < 80 else "")
+            if s.finetune_epochs < 120 or s.pretrain_epochs < 80
+            else ""
+        )
     )

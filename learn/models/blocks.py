@@ -55,10 +55,7 @@ class ConvBNReLU(nn.Sequential):
 def conv_stack(channels: list[int], *, batch_norm: bool) -> nn.Sequential:
     """3 × 3 same-size ``ConvBNReLU`` blocks taking ``channels[0]`` to ``channels[-1]``."""
     return nn.Sequential(
-        *(
-            ConvBNReLU(a, b, 3, batch_norm=batch_norm)
-            for a, b in pairwise(channels)
-        )
+        *(ConvBNReLU(a, b, 3, batch_norm=batch_norm) for a, b in pairwise(channels))
     )
 
 

@@ -47,8 +47,10 @@ class HandsNet(nn.Module):
     ) -> None:
         super().__init__()
         if not 0.0 <= dropout_scale < 1.0 / 0.6:
-            raise ConfigError(f"HandsNet dropout_scale {dropout_scale}: the rates (up to 60 %) "
-                              "times it must stay in [0, 1). Fix: 1 (the paper), 0 (none)")
+            raise ConfigError(
+                f"HandsNet dropout_scale {dropout_scale}: the rates (up to 60 %) "
+                "times it must stay in [0, 1). Fix: 1 (the paper), 0 (none)"
+            )
         k = float(dropout_scale)
         self.num_classes, self.in_channels = num_classes, in_channels
         self.input_size = (int(input_size[0]), int(input_size[1]))

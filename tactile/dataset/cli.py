@@ -55,23 +55,27 @@ def ingest_command(
             "columns (raw channel frames) or N = n_taxels columns (taxel frames)."
         ),
     ],
-    out: Annotated[
-        Path, typer.Option(help="Output dataset folder (new or empty; a folder path).")
-    ],
+    out: Annotated[Path, typer.Option(help="Output dataset folder (new or empty; a folder path).")],
     labels: Annotated[
         Path | None,
-        typer.Option(help="Per-frame class labels (.csv/.npy, one per frame, unitless): "
-                     "1 or hand, 0 or non_hand."),
+        typer.Option(
+            help="Per-frame class labels (.csv/.npy, one per frame, unitless): "
+            "1 or hand, 0 or non_hand."
+        ),
     ] = None,
     part_labels: Annotated[
         Path | None,
-        typer.Option(help="Per-taxel part labels (.csv/.npy, T rows x N columns, unitless "
-                     "class ids 0..6 of tactile.CLASS_NAMES)."),
+        typer.Option(
+            help="Per-taxel part labels (.csv/.npy, T rows x N columns, unitless "
+            "class ids 0..6 of tactile.CLASS_NAMES)."
+        ),
     ] = None,
     baseline: Annotated[
         Path | None,
-        typer.Option(help="Untouched frames (.csv/.npy, raw counts, same columns as FRAMES); "
-                     "their mean per taxel is subtracted. Default: 0 counts."),
+        typer.Option(
+            help="Untouched frames (.csv/.npy, raw counts, same columns as FRAMES); "
+            "their mean per taxel is subtracted. Default: 0 counts."
+        ),
     ] = None,
     step_mm: Annotated[float, typer.Option(help="Grid step of the tactile image, mm/pixel.")] = 1.0,
     counts_per_pa: Annotated[
@@ -84,9 +88,15 @@ def ingest_command(
 
     try:
         path = ingest_recording(
-            layout, frames, out, labels_path=labels, part_labels_path=part_labels,
-            baseline_path=baseline, step_mm=step_mm, counts_per_pa=counts_per_pa,
-        )  # fmt: skip
+            layout,
+            frames,
+            out,
+            labels_path=labels,
+            part_labels_path=part_labels,
+            baseline_path=baseline,
+            step_mm=step_mm,
+            counts_per_pa=counts_per_pa,
+        )
     except HandskinError as err:
         _fail(err)
     typer.echo(f"dataset written to {path}")
@@ -136,11 +146,18 @@ def write_sheet(dataset_dir: Path, png: Path, n: int = 24, **filters) -> Path:
     with open_dataset(dataset_dir) as ds:
         idx = select_samples(ds, n=n, **filters)
         images = np.stack([ds["image"][i] for i in idx])
-        labels = np.stack([ds["label_image"][i] for i in idx]) if "label_image" in ds.fields \
-            else None
+        labels = (
+            np.stack([ds["label_image"][i] for i in idx]) if "label_image" in ds.fields else None
+        )
         title = f"{ds.attrs.get('part', '')}: {len(idx)} of {len(ds)} samples"
-        return save_contact_sheet(png, images, labels=labels, n_cols=6, title=title,
-                                  titles=[_caption(ds, int(i)) for i in idx])
+        return save_contact_sheet(
+            png,
+            images,
+            labels=labels,
+            n_cols=6,
+            title=title,
+            titles=[_caption(ds, int(i)) for i in idx],
+        )
 
 
 def sheet_command(
@@ -148,14 +165,22 @@ def sheet_command(
         Path, typer.Argument(help="Dataset folder (holding dataset.h5) or the dataset.h5 file.")
     ],
     png: Annotated[Path, typer.Option(help="Output PNG file (100 dpi; one tile per sample).")],
-    cls: Annotated[str | None, typer.Option(
-        "--class", help="Only hand or non_hand samples (class name).")] = None,
-    action: Annotated[str | None, typer.Option(
-        help="Only this action (name, e.g. grasp, push_left; see attr `actions`).")] = None,
-    subject: Annotated[int | None, typer.Option(
-        help="Only this subject (integer id, e.g. 7 for s0007).")] = None,
-    n: Annotated[int, typer.Option("--n", help="Number of tiles (count), spread evenly over "
-                                               "the matching samples.")] = 24,
+    cls: Annotated[
+        str | None, typer.Option("--class", help="Only hand or non_hand samples (class name).")
+    ] = None,
+    action: Annotated[
+        str | None,
+        typer.Option(help="Only this action (name, e.g. grasp, push_left; see attr `actions`)."),
+    ] = None,
+    subject: Annotated[
+        int | None, typer.Option(help="Only this subject (integer id, e.g. 7 for s0007).")
+    ] = None,
+    n: Annotated[
+        int,
+        typer.Option(
+            "--n", help="Number of tiles (count), spread evenly over the matching samples."
+        ),
+    ] = 24,
 ) -> None:
     """Contact sheet of a dataset: tactile images with label colours and the class legend."""
     try:

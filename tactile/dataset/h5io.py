@@ -132,9 +132,14 @@ def read_map(g: h5py.Group) -> TactileMap:
         *(g[f"distortion_{k}"][()] for k in DISTORTION), int(g.attrs["distortion_n_flipped"])
     )
     return TactileMap.from_flat(
-        g["positions_m"][()], g["vertex_uv_mm"][()], g["vertex_taxel"][()], g["faces"][()],
-        step_mm=float(g.attrs["step_mm"]), distortion=report, taxel_uv_mm=g["uv"][()],
-    )  # fmt: skip
+        g["positions_m"][()],
+        g["vertex_uv_mm"][()],
+        g["vertex_taxel"][()],
+        g["faces"][()],
+        step_mm=float(g.attrs["step_mm"]),
+        distortion=report,
+        taxel_uv_mm=g["uv"][()],
+    )
 
 
 def read_layout(g: h5py.Group) -> TaxelLayout:

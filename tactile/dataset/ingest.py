@@ -252,8 +252,13 @@ def ingest_recording(
     """
     if not (np.isfinite(counts_per_pa) and counts_per_pa > 0):
         raise DataError(f"counts_per_pa must be a positive count/Pa, got {counts_per_pa}")
-    sources = {"layout": layout_path, "frames": frames_path, "labels": labels_path,
-               "part_labels": part_labels_path, "baseline": baseline_path}  # fmt: skip
+    sources = {
+        "layout": layout_path,
+        "frames": frames_path,
+        "labels": labels_path,
+        "part_labels": part_labels_path,
+        "baseline": baseline_path,
+    }
     rec = read_recording(**{f"{k}_path": v for k, v in sources.items()})
     tmap = TactileMap.build(rec.layout, step_mm=step_mm)
     config = {
@@ -264,10 +269,15 @@ def ingest_recording(
         "counts_per_pa": float(counts_per_pa),
     }
     writer = DatasetWriter(
-        out_dir, config=config, part=rec.layout.name or Path(layout_path).stem,
-        generator_version=GENERATOR_VERSION, seed=0, tmap=tmap, layout=rec.layout,
+        out_dir,
+        config=config,
+        part=rec.layout.name or Path(layout_path).stem,
+        generator_version=GENERATOR_VERSION,
+        seed=0,
+        tmap=tmap,
+        layout=rec.layout,
         attrs={"skin_counts_per_pa": float(counts_per_pa), "skin_baseline_counts": rec.baseline},
-    )  # fmt: skip
+    )
     pressure = np.maximum(rec.taxels - rec.baseline, 0.0) / counts_per_pa
     done = set(writer.complete_chunks())
     for k, start in enumerate(range(0, len(pressure), CHUNK_FRAMES)):

@@ -151,8 +151,10 @@ def merge_chunks(
     manifest = read_manifest(folder)
     method = str((manifest.get("config") or {}).get("split", "greedy"))
     if method not in METHODS:
-        raise DataError(f"{folder}: the manifest's split method {method!r} is unknown; choose one "
-                        f"of {', '.join(METHODS)} in its configuration")
+        raise DataError(
+            f"{folder}: the manifest's split method {method!r} is unknown; choose one "
+            f"of {', '.join(METHODS)} in its configuration"
+        )
     if not (folder / CHUNKS / STATIC).exists():
         raise DataError(f"{folder}: {CHUNKS}/{STATIC} is missing. Fix: rerun the generator")
     ks = _chunks_to_merge(folder, n_chunks)
@@ -162,9 +164,13 @@ def merge_chunks(
     def fill(f: h5py.File) -> None:
         stats = _stream(f, folder, ks, counts, shapes)
         split = split_indices(
-            stats.column("is_hand"), stats.column("subject_id"), stats.column("instance_id"),
-            train_fraction=train_fraction, seed=int(manifest["seed"]), method=method,
-        )  # fmt: skip
+            stats.column("is_hand"),
+            stats.column("subject_id"),
+            stats.column("instance_id"),
+            train_fraction=train_fraction,
+            seed=int(manifest["seed"]),
+            method=method,
+        )
         g = h5io.group(f, "splits")
         h5io.plain_dataset(g, "train", split.train.astype(np.int64))
         h5io.plain_dataset(g, "test", split.test.astype(np.int64))
@@ -183,8 +189,9 @@ def merge_chunks(
     return path
 
 
-def _root_attrs(manifest: dict, stats: _Stats, report: dict, n: int, fraction: float,
-                method: str) -> dict:  # fmt: skip
+def _root_attrs(
+    manifest: dict, stats: _Stats, report: dict, n: int, fraction: float, method: str
+) -> dict:
     return {
         "format": manifest["format"],
         "fingerprint": manifest["fingerprint"],
@@ -199,14 +206,25 @@ def _root_attrs(manifest: dict, stats: _Stats, report: dict, n: int, fraction: f
         "train_fraction": float(fraction),
         "split_method": method,
         "n_samples": int(n),
-    }  # fmt: skip
+    }
 
 
 def _info(manifest: dict, attrs: dict, shapes: dict, extra: dict, dims: np.ndarray) -> dict:
     seq = shapes["seq_raw"][0] if "seq_raw" in shapes else None
     d = Dims(int(dims[0]), int(dims[1]), int(dims[2]), seq)
-    keys = ("format", "fingerprint", "part", "seed", "generator_version", "n_samples",
-            "class_balance", "rejects", "split_method", "split_report", "versions")  # fmt: skip
+    keys = (
+        "format",
+        "fingerprint",
+        "part",
+        "seed",
+        "generator_version",
+        "n_samples",
+        "class_balance",
+        "rejects",
+        "split_method",
+        "split_report",
+        "versions",
+    )
     return {
         **{k: attrs[k] for k in keys},
         "dims": {"N": d.n_taxels, "H": d.height, "W": d.width, "T": d.seq_len},

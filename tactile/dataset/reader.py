@@ -170,7 +170,10 @@ class DatasetReader:
         return self.readout.pressure_pa(raw, time_s)
 
     def images_from_raw(
-        self, raw: np.ndarray, tmap: TactileMap | None = None, keep: np.ndarray | None = None,
+        self,
+        raw: np.ndarray,
+        tmap: TactileMap | None = None,
+        keep: np.ndarray | None = None,
         time_s: np.ndarray | float | None = None,
     ) -> np.ndarray:
         """Tactile images recomputed from raw readings through a (possibly corrupted) map.

@@ -54,8 +54,10 @@ class Readout:
             floor = NOISE_FLOOR_SIGMAS * float(skin.get("noise_std_counts", 0.0))
         gain = float(attrs.get("skin_counts_per_pa", 1.0))
         if not gain > 0:
-            raise DataError(f"skin_counts_per_pa = {gain} must be > 0 counts/Pa. Fix: re-ingest "
-                            "the recording with its skin's gain (--counts-per-pa)")
+            raise DataError(
+                f"skin_counts_per_pa = {gain} must be > 0 counts/Pa. Fix: re-ingest "
+                "the recording with its skin's gain (--counts-per-pa)"
+            )
         return cls(
             gain,
             np.asarray(attrs.get("skin_baseline_counts", 0.0), dtype=np.float64),
@@ -78,7 +80,9 @@ class Readout:
 
     def attrs(self) -> dict[str, object]:
         """The root attributes that describe this readout (the inverse of `of`)."""
-        return {"skin_counts_per_pa": self.gain_counts_per_pa,
-                "skin_baseline_counts": np.asarray(self.baseline_counts, np.float64),
-                "skin_drift_counts_per_s": np.asarray(self.drift_counts_per_s, np.float64),
-                "skin_noise_floor_counts": self.floor_counts}  # fmt: skip
+        return {
+            "skin_counts_per_pa": self.gain_counts_per_pa,
+            "skin_baseline_counts": np.asarray(self.baseline_counts, np.float64),
+            "skin_drift_counts_per_s": np.asarray(self.drift_counts_per_s, np.float64),
+            "skin_noise_floor_counts": self.floor_counts,
+        }

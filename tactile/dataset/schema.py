@@ -46,30 +46,74 @@ def _s(name: str, dtype: str, shape: tuple, unit: str, text: str, **kw: object) 
 LABELS = (0, N_CLASSES - 1)
 FIELDS: tuple[FieldSpec, ...] = (
     _s("raw", "uint16", ("N",), "count", "16-bit skin reading per taxel (noisy)", required=True),
-    _s("pressure_pa", "float32", ("N",), "Pa", "noise-free pressure per taxel (ingest: "
-       "(raw - baseline) / counts_per_pa, clipped at 0)", required=True),
-    _s("taxel_label", "uint8", ("N",), "class", "class per taxel: 0 none, 1..6 hand parts "
-       "(tactile.CLASS_NAMES)", values=LABELS),
-    _s("taxel_contactor", "int16", ("N",), "index", "index into the sample's contactor list, "
-       "-1 none", values=(-1, 32767)),
-    _s("image", "uint8", ("H", "W"), "grey level", "tactile image from the readings (paper's "
-       "pipeline, TactileMap.image)", required=True),
-    _s("label_image", "uint8", ("H", "W"), "class", "class per pixel (0 for non-hand samples)",
-       values=LABELS),
+    _s(
+        "pressure_pa",
+        "float32",
+        ("N",),
+        "Pa",
+        "noise-free pressure per taxel (ingest: (raw - baseline) / counts_per_pa, clipped at 0)",
+        required=True,
+    ),
+    _s(
+        "taxel_label",
+        "uint8",
+        ("N",),
+        "class",
+        "class per taxel: 0 none, 1..6 hand parts (tactile.CLASS_NAMES)",
+        values=LABELS,
+    ),
+    _s(
+        "taxel_contactor",
+        "int16",
+        ("N",),
+        "index",
+        "index into the sample's contactor list, -1 none",
+        values=(-1, 32767),
+    ),
+    _s(
+        "image",
+        "uint8",
+        ("H", "W"),
+        "grey level",
+        "tactile image from the readings (paper's pipeline, TactileMap.image)",
+        required=True,
+    ),
+    _s(
+        "label_image",
+        "uint8",
+        ("H", "W"),
+        "class",
+        "class per pixel (0 for non-hand samples)",
+        values=LABELS,
+    ),
     _s("is_hand", "uint8", (), "bool", "1 hand, 0 non-hand", values=(0, 1)),
     _s("action", "int8", (), "index", "index into attrs['actions'], -1 none", values=(-1, 127)),
-    _s("operator_position", "int8", (), "index", "0 front, 1 side, 2 free, -1 none",
-       values=(-1, 2)),
+    _s(
+        "operator_position", "int8", (), "index", "0 front, 1 side, 2 free, -1 none", values=(-1, 2)
+    ),
     _s("subject_id", "int32", (), "id", "subject of a hand sample, -1 for non-hand samples"),
     _s("instance_id", "int32", (), "id", "object / body-part instance, -1 for hand samples"),
     _s("contactor", STR, (), "JSON", "JSON description of the contactor(s)"),
     _s("episode_seed", "uint64", (), "seed", "seed of the accepted episode"),
     _s("force_n", "float32", (), "N", "total normal force at the sampled frame"),
     _s("time_s", "float32", (), "s", "time of the sampled frame in the episode"),
-    FieldSpec("seq_raw", "sequences/raw", "uint16", ("T", "N"), "count",
-              "10 Hz sequence of raw readings, zero-padded after seq_length frames"),
-    FieldSpec("seq_length", "sequences/length", "int16", (), "frames",
-              "valid frames of seq_raw", values=(0, 32767)),
+    FieldSpec(
+        "seq_raw",
+        "sequences/raw",
+        "uint16",
+        ("T", "N"),
+        "count",
+        "10 Hz sequence of raw readings, zero-padded after seq_length frames",
+    ),
+    FieldSpec(
+        "seq_length",
+        "sequences/length",
+        "int16",
+        (),
+        "frames",
+        "valid frames of seq_raw",
+        values=(0, 32767),
+    ),
 )
 BY_NAME: dict[str, FieldSpec] = {f.name: f for f in FIELDS}
 REQUIRED = tuple(f.name for f in FIELDS if f.required)

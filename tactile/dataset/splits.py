@@ -72,8 +72,7 @@ def units(subject_id: np.ndarray, instance_id: np.ndarray) -> np.ndarray:
     return connected_components(graph, directed=False)[1][:n].astype(np.int64)
 
 
-def unit_keys(unit: np.ndarray, subject_id: np.ndarray, instance_id: np.ndarray
-              ) -> np.ndarray:  # fmt: skip
+def unit_keys(unit: np.ndarray, subject_id: np.ndarray, instance_id: np.ndarray) -> np.ndarray:
     """(U, 2) int64 key of each unit: (0, smallest subject id), else (1, smallest instance id),
     else (2, index of its one sample). ``unit`` is :func:`units`' output, ids (S,) int."""
     n_units = int(unit.max(initial=-1)) + 1
@@ -94,8 +93,9 @@ def unit_keys(unit: np.ndarray, subject_id: np.ndarray, instance_id: np.ndarray
 def keyed_draws(keys: np.ndarray, seed: int, stream: int = 0) -> np.ndarray:
     """(U,) float64 in [0, 1): one uniform draw per unit key (U, 2) from
     ``SeedSequence([seed, stream, kind, id])``; the same key gives the same draw in any dataset."""
-    return np.array([np.random.default_rng([seed, stream, int(k), int(i)]).random()
-                     for k, i in keys])  # fmt: skip
+    return np.array(
+        [np.random.default_rng([seed, stream, int(k), int(i)]).random() for k, i in keys]
+    )
 
 
 def _assign_keyed(draws: np.ndarray, fraction: float) -> np.ndarray:
@@ -153,13 +153,17 @@ def split_indices(
     np.add.at(counts, (unit, cls.clip(0, 1)), 1)
     unit_cls = (counts[:, 1] > counts[:, 0]).astype(np.int64)
     rng = np.random.default_rng(seed)
-    draws = keyed_draws(unit_keys(unit, subject, instance), seed, stream) if method == "keyed" \
-        else None  # fmt: skip
+    draws = (
+        keyed_draws(unit_keys(unit, subject, instance), seed, stream) if method == "keyed" else None
+    )
     in_train = np.zeros(n_units, dtype=bool)
     for c in (0, 1):
         members = np.flatnonzero(unit_cls == c)
-        in_train[members] = (_assign(counts[members].sum(axis=1), train_fraction, rng)
-                             if draws is None else _assign_keyed(draws[members], train_fraction))
+        in_train[members] = (
+            _assign(counts[members].sum(axis=1), train_fraction, rng)
+            if draws is None
+            else _assign_keyed(draws[members], train_fraction)
+        )
     train_mask = in_train[unit]
     train, test = np.flatnonzero(train_mask), np.flatnonzero(~train_mask)
     return Split(train, test, split_report(cls if is_hand is not None else None, train_mask))

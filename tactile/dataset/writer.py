@@ -34,9 +34,22 @@ CHUNKS = "chunks"
 STATIC = "static.h5"  # chunks/static.h5: map, layout, dims and the caller's attrs, written once
 CHUNK_RE = re.compile(r"^chunk_(\d{6})\.h5$")
 RESERVED_ATTRS = frozenset(
-    {"format", "fingerprint", "config", "versions", "generator_version", "seed", "part",
-     "class_balance", "rejects", "split_method", "split_report", "train_fraction", "n_samples"}
-)  # fmt: skip
+    {
+        "format",
+        "fingerprint",
+        "config",
+        "versions",
+        "generator_version",
+        "seed",
+        "part",
+        "class_balance",
+        "rejects",
+        "split_method",
+        "split_report",
+        "train_fraction",
+        "n_samples",
+    }
+)
 
 
 def chunk_path(folder: str | Path, k: int) -> Path:
@@ -163,9 +176,11 @@ class DatasetWriter:
         from tactile.dataset.merge import merge_chunks
 
         return merge_chunks(
-            self.folder, n_chunks=n_chunks, train_fraction=train_fraction,
+            self.folder,
+            n_chunks=n_chunks,
+            train_fraction=train_fraction,
             remove_chunks=remove_chunks,
-        )  # fmt: skip
+        )
 
 
 def json_attr(obj: h5py.HLObject, key: str) -> object:
@@ -183,9 +198,12 @@ def _fill_chunk(
         data = np.array(values, dtype=object) if spec.dtype == STR else np.stack(values)
         dtype = h5io.h5_dtype(spec.dtype)
         h5io.group(f, parent).create_dataset(
-            leaf, data=data, dtype=dtype, track_times=False,
+            leaf,
+            data=data,
+            dtype=dtype,
+            track_times=False,
             **({} if spec.dtype == STR else {"compression": "gzip", "compression_opts": 1}),
-        )  # fmt: skip
+        )
     h5io.set_attrs(
         f, {"chunk": int(k), "n_samples": len(samples), "fields": list(fields), "rejects": rejects}
     )

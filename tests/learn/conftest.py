@@ -55,13 +55,16 @@ def make_sample(i: int, tmap: TactileMap, flat_mm: np.ndarray) -> dict:
     p, labels = hand_pressure(flat_mm, rng) if hand else (blob_pressure(flat_mm, rng), None)
     labels = np.zeros(len(p), np.uint8) if labels is None else labels
     return {
-        "raw": np.round(GAIN * p).astype(np.uint16), "pressure_pa": p.astype(np.float32),
-        "image": tmap.image(p), "taxel_label": labels,
+        "raw": np.round(GAIN * p).astype(np.uint16),
+        "pressure_pa": p.astype(np.float32),
+        "image": tmap.image(p),
+        "taxel_label": labels,
         "label_image": tmap.label_image(p, labels) if hand else np.zeros(tmap.shape, np.uint8),
-        "is_hand": np.uint8(hand), "subject_id": np.int32(i // 4 if hand else -1),
+        "is_hand": np.uint8(hand),
+        "subject_id": np.int32(i // 4 if hand else -1),
         "instance_id": np.int32(-1 if hand else (i - N_HAND) // 4),
         "force_n": np.float32(rng.uniform(1.0, 60.0)),  # drawn last: earlier draws unchanged
-    }  # fmt: skip
+    }
 
 
 def as_object(row: dict) -> dict:
@@ -70,9 +73,14 @@ def as_object(row: dict) -> dict:
     if not row["is_hand"]:
         return row
     instance = np.int32(100 + row["subject_id"])
-    return {**row, "is_hand": np.uint8(0), "subject_id": np.int32(-1), "instance_id": instance,
-            "taxel_label": np.zeros_like(row["taxel_label"]),
-            "label_image": np.zeros_like(row["label_image"])}  # fmt: skip
+    return {
+        **row,
+        "is_hand": np.uint8(0),
+        "subject_id": np.int32(-1),
+        "instance_id": instance,
+        "taxel_label": np.zeros_like(row["taxel_label"]),
+        "label_image": np.zeros_like(row["label_image"]),
+    }
 
 
 def with_contactor(row: dict) -> dict:
@@ -85,9 +93,14 @@ def with_contactor(row: dict) -> dict:
     return {**row, "contactor": json.dumps(c)}
 
 
-def write_tiny_dataset(folder, samples: list[int], drop: tuple[str, ...] = (),
-                       hands_as_objects: bool = False, split: str | None = None,
-                       contactors: bool = False):  # fmt: skip
+def write_tiny_dataset(
+    folder,
+    samples: list[int],
+    drop: tuple[str, ...] = (),
+    hands_as_objects: bool = False,
+    split: str | None = None,
+    contactors: bool = False,
+):
     """Write samples ``samples`` (`make_sample` numbering) of the tiny set to ``folder``,
     without the fields ``drop``, the hands recorded as objects if ``hands_as_objects``, split by
     method ``split`` (None: the default, greedy), with a ``contactor`` JSON per sample if
@@ -95,9 +108,16 @@ def write_tiny_dataset(folder, samples: list[int], drop: tuple[str, ...] = (),
     layout, flat_mm = cylinder_sector_layout(width_mm=60, length_mm=90, pitch_mm=5)
     tmap = TactileMap.build(layout)
     config = {"test": "tiny"} if split is None else {"test": "tiny", "split": split}
-    writer = DatasetWriter(folder, config=config, part="sector", generator_version="t",
-                           seed=3, tmap=tmap, layout=layout,
-                           attrs={"skin_counts_per_pa": GAIN})  # fmt: skip
+    writer = DatasetWriter(
+        folder,
+        config=config,
+        part="sector",
+        generator_version="t",
+        seed=3,
+        tmap=tmap,
+        layout=layout,
+        attrs={"skin_counts_per_pa": GAIN},
+    )
     rows = [make_sample(i, tmap, flat_mm) for i in samples]
     rows = [as_object(r) for r in rows] if hands_as_objects else rows
     rows = [with_contactor(r) for r in rows] if contactors else rows
@@ -163,4 +183,3 @@ def resume_after_edit(run, data, folder, edit):
     edit(ckpt["config"])
     save_checkpoint(ckpt, last)
     return full, fit(run, data, folder / "cut", resume=True, progress=False)
-

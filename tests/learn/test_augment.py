@@ -76,8 +76,9 @@ def repeats_and_differs(dataset, run, **change) -> bool:
     torch.set_num_threads(1)
     data = load_data(dataset, run)
     changed = dataclasses.replace(run, **change)
-    a, b, plain = (fit(r, data, None, progress=False).history[0]["train_loss"]
-                   for r in (changed, changed, run))  # fmt: skip
+    a, b, plain = (
+        fit(r, data, None, progress=False).history[0]["train_loss"] for r in (changed, changed, run)
+    )
     return a == b and a != plain
 
 
@@ -99,8 +100,13 @@ def test_mix_batch_matches_a_loop_over_items():
         expected[y[perm[i]]] += 1 - lam
         np.testing.assert_allclose(q[i].numpy(), expected, rtol=1e-6)
     with pytest.raises(ValueError, match="label images"):
-        mix_batch(torch.from_numpy(x), torch.zeros(5, 4, 6, dtype=torch.int64), lam,
-                  torch.from_numpy(perm), 3)  # fmt: skip
+        mix_batch(
+            torch.from_numpy(x),
+            torch.zeros(5, 4, 6, dtype=torch.int64),
+            lam,
+            torch.from_numpy(perm),
+            3,
+        )
 
 
 def test_mixup_weights_follow_beta_and_alpha_zero_is_the_identity():

@@ -69,18 +69,22 @@ def test_loss_is_the_class_ce_plus_the_weighted_type_ce_of_the_output_layers_inp
     seen = {}
     model.classifier[-1].register_forward_hook(lambda m, i, o: seen.update(h=i[0], z=o))
     optimizer = torch.optim.SGD([*model.parameters(), *head.parameters()], lr=0.0)
-    value = train_step(model, torch.nn.CrossEntropyLoss(), optimizer, x, y, "classify",
-                       aux=(head, types))  # fmt: skip
+    value = train_step(
+        model, torch.nn.CrossEntropyLoss(), optimizer, x, y, "classify", aux=(head, types)
+    )
     z = seen["z"].detach().numpy().astype(np.float64)
     w, b = (p.detach().numpy().astype(np.float64) for p in (head.linear.weight, head.linear.bias))
     t = seen["h"].detach().numpy().astype(np.float64) @ w.T + b
-    expected = (-_log_softmax(z)[np.arange(6), y.numpy()].mean()
-                - 0.7 * _log_softmax(t)[np.arange(6), types.numpy()].mean())
+    expected = (
+        -_log_softmax(z)[np.arange(6), y.numpy()].mean()
+        - 0.7 * _log_softmax(t)[np.arange(6), types.numpy()].mean()
+    )
     assert value == pytest.approx(expected, rel=1e-5)
 
 
-def test_checkpoints_hold_the_plain_network_and_a_cut_run_resumes_exactly(typed_dataset, tiny_run,
-                                                                          tmp_path):  # fmt: skip
+def test_checkpoints_hold_the_plain_network_and_a_cut_run_resumes_exactly(
+    typed_dataset, tiny_run, tmp_path
+):
     run = aux_run(tiny_run, epochs=2)
     data = load_data(typed_dataset, run)
     assert data.type_names == (HAND_TYPE, "object: ball", "object: disc")
@@ -99,8 +103,10 @@ def test_checkpoints_hold_the_plain_network_and_a_cut_run_resumes_exactly(typed_
 
 @pytest.mark.parametrize(
     ("change", "match"),
-    [({"aux_types_weight": -1.0}, "weight >= 0"),
-     ({"aux_types_weight": 1.0, "mixup_alpha": 0.2}, "set one of them to 0")],
+    [
+        ({"aux_types_weight": -1.0}, "weight >= 0"),
+        ({"aux_types_weight": 1.0, "mixup_alpha": 0.2}, "set one of them to 0"),
+    ],
 )
 def test_bad_type_head_settings_are_refused(tiny_run, change, match):
     with pytest.raises(ConfigError, match=match):
@@ -112,8 +118,7 @@ def test_a_segmenter_cannot_take_a_type_head(tiny_run):
         dataclasses.replace(tiny_run("segnet"), aux_types_weight=1.0)
 
 
-def test_data_without_contactor_types_are_refused_before_training(tiny_dataset, tiny_run,
-                                                                  tmp_path):  # fmt: skip
+def test_data_without_contactor_types_are_refused_before_training(tiny_dataset, tiny_run, tmp_path):
     run = aux_run(tiny_run)
     with pytest.raises(ConfigError, match="record no contactor type"):
         load_data(tiny_dataset, run)  # this tiny set has no contactor field
@@ -123,8 +128,7 @@ def test_data_without_contactor_types_are_refused_before_training(tiny_dataset, 
     assert not (tmp_path / "run").exists()
 
 
-def test_fault_aware_fine_tuning_takes_a_type_head_checkpoint(typed_dataset, tiny_run,
-                                                               tmp_path):  # fmt: skip
+def test_fault_aware_fine_tuning_takes_a_type_head_checkpoint(typed_dataset, tiny_run, tmp_path):
     """`handskin experiment fault-aware` retrains from a checkpoint's configuration; the faulty
     copies carry no contactor types, so the head (a training aid) is left out there."""
     from learn.experiments.fault_aware import FaultAwareScale, fault_aware_model
@@ -132,11 +136,22 @@ def test_fault_aware_fine_tuning_takes_a_type_head_checkpoint(typed_dataset, tin
 
     run = aux_run(tiny_run, epochs=1)
     fit(run, load_data(typed_dataset, run), tmp_path / "aux", progress=False)
-    scale = FaultAwareScale(Scale(1, None, 4, n_spots=(2,), radii_mm=(20.0,),
-                                  fractions=(0.0, 0.6)), epochs=(1, 1), n_train=(8, 8),
-                            copies=1)  # fmt: skip
-    out = fault_aware_model(tmp_path / "aux" / "best.pt", typed_dataset, tmp_path / "fa",
-                            epochs=1, n_train=8, scale=scale, seed=0, progress=False)  # fmt: skip
+    scale = FaultAwareScale(
+        Scale(1, None, 4, n_spots=(2,), radii_mm=(20.0,), fractions=(0.0, 0.6)),
+        epochs=(1, 1),
+        n_train=(8, 8),
+        copies=1,
+    )
+    out = fault_aware_model(
+        tmp_path / "aux" / "best.pt",
+        typed_dataset,
+        tmp_path / "fa",
+        epochs=1,
+        n_train=8,
+        scale=scale,
+        seed=0,
+        progress=False,
+    )
     tuned = load_checkpoint(out["checkpoint"])
     assert tuned["config"]["aux_types_weight"] == 0.0 and out["train_images"] == 16
     plain = create_model("handsnet", **run.model.kwargs())

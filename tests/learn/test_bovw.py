@@ -118,7 +118,7 @@ def test_linear_svm_arrays_match_sklearn(n_classes):
     assert np.array_equal(svm.predict(x), svc.predict(x))
 
 
-TINY_BOVW = 'input_size = [32, 48]\nvocabulary_size = 20\n'  # small images, few words: fast
+TINY_BOVW = "input_size = [32, 48]\nvocabulary_size = 20\n"  # small images, few words: fast
 
 
 @pytest.fixture(scope="module")
@@ -128,9 +128,22 @@ def bovw_run(tiny_dataset, tmp_path_factory):
     (folder / "bovw.toml").write_text(TINY_BOVW)
     app = typer.Typer()
     register(app)
-    res = CliRunner().invoke(app, ["train", str(tiny_dataset), "--out", str(folder / "run"),
-                                   "--arch", "bovw", "--config", str(folder / "bovw.toml"),
-                                   "--seed", "2", "--no-progress"])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        [
+            "train",
+            str(tiny_dataset),
+            "--out",
+            str(folder / "run"),
+            "--arch",
+            "bovw",
+            "--config",
+            str(folder / "bovw.toml"),
+            "--seed",
+            "2",
+            "--no-progress",
+        ],
+    )
     assert res.exit_code == 0, res.output
     return folder / "run"
 
@@ -155,8 +168,10 @@ def test_evaluate_fills_the_bovw_row(bovw_run, tiny_dataset, tmp_path):
     app = typer.Typer()
     register(app)
     md = tmp_path / "report.md"
-    res = CliRunner().invoke(app, ["evaluate", str(bovw_run / MODEL_FILE), "--data",
-                                   str(tiny_dataset), "--report", str(md)])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        ["evaluate", str(bovw_run / MODEL_FILE), "--data", str(tiny_dataset), "--report", str(md)],
+    )
     assert res.exit_code == 0, res.output
     (row,) = json.loads(md.with_suffix(".json").read_text())
     ds = open_dataset(tiny_dataset)
@@ -182,8 +197,15 @@ def test_bovw_option_errors_before_work(tiny_dataset, tmp_path, extra, message):
     (tmp_path / "bad.toml").write_text("vocab = 3\n")
     app = typer.Typer()
     register(app)
-    args = ["train", str(tiny_dataset), "--out", str(tmp_path / "out"), "--arch", "bovw",
-            *[a.format(bad=tmp_path / "bad.toml") for a in extra]]
+    args = [
+        "train",
+        str(tiny_dataset),
+        "--out",
+        str(tmp_path / "out"),
+        "--arch",
+        "bovw",
+        *[a.format(bad=tmp_path / "bad.toml") for a in extra],
+    ]
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 2 and message in res.output, res.output
     assert not (tmp_path / "out").exists()

@@ -44,8 +44,7 @@ def test_bins_and_per_class_accuracy_by_hand():
     n_active = np.array([3, 9, 10, 15, 25, 90, 200, 5])
     truth = np.array([1, 1, 0, 1, 0, 1, 0, 0])
     pred = np.array([0, 1, 0, 0, 1, 1, 0, 0])
-    rows = accuracy_by_active_taxels(pred, truth, n_active, ["non_hand", "hand"],
-                                     edges=(0, 10, 80))  # fmt: skip
+    rows = accuracy_by_active_taxels(pred, truth, n_active, ["non_hand", "hand"], edges=(0, 10, 80))
     assert [(r["lo"], r["hi"], r["n"]) for r in rows] == [(0, 10, 3), (10, 80, 3), (80, None, 2)]
     first, middle, last = (r["per_class"] for r in rows)
     assert first["hand"] == {"n": 2, "accuracy": 0.5}
@@ -66,7 +65,12 @@ def test_force_bins_by_hand_half_open_and_out_of_range():
     pred = np.array([0, 1, 0, 0, 1, 0, 1, 1, 1, 1, 0])
     rows = accuracy_by_bins(pred, truth, force, ["non_hand", "hand"], FORCE_EDGES_N)
     assert [(r["lo"], r["hi"], r["n"]) for r in rows] == [
-        (0, 5, 2), (5, 10, 1), (10, 20, 2), (20, 40, 2), (40, None, 2)]
+        (0, 5, 2),
+        (5, 10, 1),
+        (10, 20, 2),
+        (20, 40, 2),
+        (40, None, 2),
+    ]
     assert rows[0]["per_class"]["hand"] == {"n": 2, "accuracy": 0.5}
     assert rows[2]["per_class"]["hand"] == {"n": 2, "accuracy": 0.5}
     assert rows[4]["per_class"]["non_hand"] == {"n": 1, "accuracy": 0.0}
@@ -75,8 +79,19 @@ def test_force_bins_by_hand_half_open_and_out_of_range():
     assert "| 0–5 N | 0 | – | 2 | 50.0 |" in table and "| 40+ N | 1 | 0.0 | 1 | 100.0 |" in table
     labels, order = bin_labels(force, FORCE_EDGES_N, "N")
     assert order == ["0–5 N", "5–10 N", "10–20 N", "20–40 N", "40+ N"]
-    assert labels == ["0–5 N", "0–5 N", "5–10 N", "10–20 N", "10–20 N", "20–40 N", "20–40 N",
-                      "40+ N", "40+ N", "unknown", "unknown"]  # fmt: skip
+    assert labels == [
+        "0–5 N",
+        "0–5 N",
+        "5–10 N",
+        "10–20 N",
+        "10–20 N",
+        "20–40 N",
+        "20–40 N",
+        "40+ N",
+        "40+ N",
+        "unknown",
+        "unknown",
+    ]
 
 
 def test_lengths_must_agree():
@@ -85,13 +100,22 @@ def test_lengths_must_agree():
 
 
 def test_accuracy_by_contactor_by_hand_least_accurate_first():
-    groups = ["object: rake", "hand: right_hand", "object: rake", "body: elbow", "hand: right_hand",
-              "object: rake"]  # fmt: skip
+    groups = [
+        "object: rake",
+        "hand: right_hand",
+        "object: rake",
+        "body: elbow",
+        "hand: right_hand",
+        "object: rake",
+    ]
     truth = np.array([0, 1, 0, 0, 1, 0])
     pred = np.array([1, 1, 0, 0, 0, 1])
     rows = accuracy_by_group(pred, truth, groups)
     assert [(r["group"], r["n"], r["errors"]) for r in rows] == [
-        ("object: rake", 3, 2), ("hand: right_hand", 2, 1), ("body: elbow", 1, 0)]
+        ("object: rake", 3, 2),
+        ("hand: right_hand", 2, 1),
+        ("body: elbow", 1, 0),
+    ]
     assert rows[0]["accuracy"] == pytest.approx(1 / 3) and rows[1]["accuracy"] == 0.5
     assert "| object: rake | 3 | 2 | 33.3 |" in "\n".join(group_markdown(rows))
     with pytest.raises(ValueError, match="length"):
@@ -100,9 +124,18 @@ def test_accuracy_by_contactor_by_hand_least_accurate_first():
 
 def test_hand_parts_groups_by_hand():
     """Class ids 1..5 fingers, 6 palm, 0 none (tactile.CLASS_NAMES)."""
-    cases = {(): "no part", (0,): "no part", (6,): "palm only", (0, 6): "palm only",
-             (2,): "one finger", (1, 6): "palm + one finger", (2, 3): "two fingers",
-             (1, 2, 6): "3 parts", (1, 2, 3, 4): "4 parts", (1, 2, 3, 4, 5, 6): "6 parts"}
+    cases = {
+        (): "no part",
+        (0,): "no part",
+        (6,): "palm only",
+        (0, 6): "palm only",
+        (2,): "one finger",
+        (1, 6): "palm + one finger",
+        (2, 3): "two fingers",
+        (1, 2, 6): "3 parts",
+        (1, 2, 3, 4): "4 parts",
+        (1, 2, 3, 4, 5, 6): "6 parts",
+    }
     for parts, name in cases.items():
         assert hand_parts_group(set(parts)) == name, parts
 
@@ -114,7 +147,11 @@ def test_hands_by_group_skips_non_hands_and_keeps_the_given_order():
     order = ("palm only", "3 parts", "6 parts")
     rows = hands_by_group(pred, truth, groups, order)
     assert [(r["group"], r["n"], r["errors"]) for r in rows] == [
-        ("palm only", 2, 1), ("3 parts", 1, 0), ("6 parts", 1, 0), ("later", 1, 1)]
+        ("palm only", 2, 1),
+        ("3 parts", 1, 0),
+        ("6 parts", 1, 0),
+        ("later", 1, 1),
+    ]
     assert [r["group"] for r in hands_by_group(pred, truth, groups)][:2] == ["later", "palm only"]
     assert hands_by_group(pred, truth, [None] * 7) == []
     assert "| hand parts | samples |" in group_markdown(rows, "hand parts")[0]

@@ -86,10 +86,10 @@ def test_dataset_inputs_and_labels_on_a_canvas_match_hand_made_padding(tiny_data
     (the tiny map is 1 mm per px), for classification and segmentation; segmentation inputs stay
     on their labels' support."""
     canvas = (40, 130)  # shorter than the tiny map (crop rows), wider (pad columns)
-    ds = TorchTactileDataset(tiny_dataset, "train", "segment", SIZE, flips=False,
-                             canvas_mm=canvas)  # fmt: skip
-    clf = TorchTactileDataset(tiny_dataset, "train", "classify", SIZE, flips=False,
-                              canvas_mm=canvas)  # fmt: skip
+    ds = TorchTactileDataset(tiny_dataset, "train", "segment", SIZE, flips=False, canvas_mm=canvas)
+    clf = TorchTactileDataset(
+        tiny_dataset, "train", "classify", SIZE, flips=False, canvas_mm=canvas
+    )
     assert ds.reader.map.step_mm == 1.0
     for k in range(3):
         i = int(ds.indices[k])
@@ -176,13 +176,16 @@ def test_evaluate_scores_a_canvas_model_on_its_canvas(tiny_dataset, tmp_path, ch
     app = typer.Typer()
     register(app)
     md = tmp_path / "r.md"
-    res = CliRunner().invoke(app, ["evaluate", str(tmp_path / "canvas.pt"), "--data",
-                                   str(tiny_dataset), "--report", str(md)])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        ["evaluate", str(tmp_path / "canvas.pt"), "--data", str(tiny_dataset), "--report", str(md)],
+    )
     assert res.exit_code == 0, res.output
     row = json.loads(md.with_suffix(".json").read_text())[0]
     model, _ = model_from_checkpoint(load_checkpoint(tmp_path / "canvas.pt"))
-    ds = TorchTactileDataset(tiny_dataset, "test", "segment", SIZE, flips=False,
-                             canvas_mm=(50.0, 120.0))  # fmt: skip
+    ds = TorchTactileDataset(
+        tiny_dataset, "test", "segment", SIZE, flips=False, canvas_mm=(50.0, 120.0)
+    )
     ref = evaluate_tensors(model, materialize(ds, progress=False), 7)
     assert row["cm"] == ref.cm.tolist() and row["canvas_mm"] == [50.0, 120.0]
     plain = TorchTactileDataset(tiny_dataset, "test", "segment", SIZE, flips=False)
@@ -202,8 +205,9 @@ def test_vgg_svm_refuses_a_canvas_checkpoint(tmp_path):
     model = ModelConfig("vgg16", 2, width=0.0625, input_size=SIZE, canvas_mm=(50.0, 80.0))
     run = RunConfig(model=model)
     net = create_model("vgg16", **model.kwargs())
-    path = save_checkpoint(make_checkpoint(net, to_dict(run), epoch=1, best_metric=0.5),
-                           tmp_path / "vgg.pt")  # fmt: skip
+    path = save_checkpoint(
+        make_checkpoint(net, to_dict(run), epoch=1, best_metric=0.5), tmp_path / "vgg.pt"
+    )
     with pytest.raises(ConfigError, match=r"canvas; VGG16 \+ SVM reads images stretched.*Fix"):
         VggSvmClassifier.from_checkpoint(path)
 
@@ -211,9 +215,16 @@ def test_vgg_svm_refuses_a_canvas_checkpoint(tmp_path):
 def test_report_rows_differing_only_by_canvas_say_so():
     from learn.row_labels import row_labels
 
-    a = {"arch": "handsnet", "config": {"model": {}}, "checkpoint": "/r/a/best.pt",
-         "train_data": {"path": "/d/ee", "n_train": 700}, "tta_views": None}
+    a = {
+        "arch": "handsnet",
+        "config": {"model": {}},
+        "checkpoint": "/r/a/best.pt",
+        "train_data": {"path": "/d/ee", "n_train": 700},
+        "tta_views": None,
+    }
     b = dict(a, checkpoint="/r/b/best.pt", canvas_mm=[229.0, 383.0])
-    assert row_labels([a, b]) == ["HandsNet, 68 x 100 px",
-                                  "HandsNet, 68 x 100 px on a 229 x 383 mm canvas"]
+    assert row_labels([a, b]) == [
+        "HandsNet, 68 x 100 px",
+        "HandsNet, 68 x 100 px on a 229 x 383 mm canvas",
+    ]
     assert row_labels([b]) == ["HandsNet"]

@@ -12,8 +12,9 @@ from learn.evaluate import evaluate_checkpoint
 from tactile.dataset.reader import open_dataset
 
 
-def test_check_splits_scores_the_splits_training_used(doc_script, checkpoints, tiny_dataset,
-                                                      capsys, monkeypatch):  # fmt: skip
+def test_check_splits_scores_the_splits_training_used(
+    doc_script, checkpoints, tiny_dataset, capsys, monkeypatch
+):
     script = doc_script("check_splits")
     parts = script.split_predictions(checkpoints["handsnet"], tiny_dataset)
     row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=2, time_rounds=1)
@@ -26,8 +27,9 @@ def test_check_splits_scores_the_splits_training_used(doc_script, checkpoints, t
     assert len(val_idx) > 0
     np.testing.assert_array_equal(np.sort(np.concatenate([fit_idx, val_idx])), np.sort(train))
     assert not (set(subject[val_idx].tolist()) & set(subject[fit_idx].tolist())) - {-1}
-    monkeypatch.setattr(sys, "argv", ["check_splits.py", str(checkpoints["handsnet"]),
-                                      str(tiny_dataset)])  # fmt: skip
+    monkeypatch.setattr(
+        sys, "argv", ["check_splits.py", str(checkpoints["handsnet"]), str(tiny_dataset)]
+    )
     script.main()
     out = capsys.readouterr().out
     test_row = f"| test | {len(idx)} | {100 * right.mean():.2f} |"

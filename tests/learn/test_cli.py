@@ -27,15 +27,28 @@ def app() -> typer.Typer:
 @pytest.fixture
 def small_config(tmp_path):
     path = tmp_path / "run.toml"
-    path.write_text('threads = 1\n[model]\ninput_size = [32, 48]\n[train]\nepochs = 2\n'
-                    'batch_size = 16\n')  # fmt: skip
+    path.write_text(
+        "threads = 1\n[model]\ninput_size = [32, 48]\n[train]\nepochs = 2\nbatch_size = 16\n"
+    )
     return path
 
 
 def test_train_evaluate_predict(app, tiny_dataset, small_config, checkpoints, tmp_path):
     out = tmp_path / "run"
-    res = runner.invoke(app, ["train", str(tiny_dataset), "--out", str(out), "--config",
-                              str(small_config), "--no-progress", "--seed", "1"])  # fmt: skip
+    res = runner.invoke(
+        app,
+        [
+            "train",
+            str(tiny_dataset),
+            "--out",
+            str(out),
+            "--config",
+            str(small_config),
+            "--no-progress",
+            "--seed",
+            "1",
+        ],
+    )
     assert res.exit_code == 0, res.output
     for name in ("best.pt", "last.pt", "curves.png", "run.toml", "test_metrics.json"):
         assert (out / name).is_file(), name
@@ -43,16 +56,38 @@ def test_train_evaluate_predict(app, tiny_dataset, small_config, checkpoints, tm
     assert report["seed"] == 1 and "torch" in report["versions"]
     assert "accuracy" in report["test_metrics"]
     md = tmp_path / "report.md"
-    res = runner.invoke(app, ["evaluate", str(out / "best.pt"), str(checkpoints["segnet"]),
-                              "--data", str(tiny_dataset), "--report", str(md)])  # fmt: skip
+    res = runner.invoke(
+        app,
+        [
+            "evaluate",
+            str(out / "best.pt"),
+            str(checkpoints["segnet"]),
+            "--data",
+            str(tiny_dataset),
+            "--report",
+            str(md),
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "Table 3" in md.read_text() and md.with_suffix(".json").is_file()
     frame = tmp_path / "frame.npy"
     np.save(frame, open_dataset(tiny_dataset).raw[2])
-    res = runner.invoke(app, ["predict", "--frame", str(frame), "--map", str(tiny_dataset),
-                              "--classifier", str(out / "best.pt"), "--segmenter",
-                              str(checkpoints["segnet"]), "--png",
-                              str(tmp_path / "p.png")])  # fmt: skip
+    res = runner.invoke(
+        app,
+        [
+            "predict",
+            "--frame",
+            str(frame),
+            "--map",
+            str(tiny_dataset),
+            "--classifier",
+            str(out / "best.pt"),
+            "--segmenter",
+            str(checkpoints["segnet"]),
+            "--png",
+            str(tmp_path / "p.png"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "probability" in res.output and "palm" in res.output and (tmp_path / "p.png").is_file()
 
@@ -84,9 +119,22 @@ def test_train_in_parts_equals_one_run(app, tiny_dataset, small_config, tmp_path
 def test_canvas_option_reaches_the_checkpoint(app, tiny_dataset, small_config, tmp_path):
     """``--canvas-mm H,W`` sets the model's input canvas (the run TOML's ``[model] canvas_mm``)."""
     out = tmp_path / "run"
-    res = runner.invoke(app, ["train", str(tiny_dataset), "--out", str(out), "--config",
-                              str(small_config), "--no-progress", "--epochs", "1",
-                              "--canvas-mm", "60,150.5"])  # fmt: skip
+    res = runner.invoke(
+        app,
+        [
+            "train",
+            str(tiny_dataset),
+            "--out",
+            str(out),
+            "--config",
+            str(small_config),
+            "--no-progress",
+            "--epochs",
+            "1",
+            "--canvas-mm",
+            "60,150.5",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert load_checkpoint(out / "best.pt")["config"]["model"]["canvas_mm"] == [60.0, 150.5]
     assert "canvas_mm = [60.0, 150.5]" in (out / "run.toml").read_text()
@@ -99,43 +147,88 @@ def test_canvas_option_reaches_the_checkpoint(app, tiny_dataset, small_config, t
         (["train", "{data}", "--out", "{out}", "--arch", "resnet"], "unknown arch 'resnet'"),
         (["train", "{data}", "--out", "{out}", "--config", "{bad}"], "key 'train.learning_rate'"),
         (["evaluate", "{out}/none.pt", "--data", "{data}"], "no checkpoint"),
-        (["evaluate", "{bad}", "{out}/../bad.toml", "--data", "{data}"],
-         "is given twice"),
-        (["evaluate", "{out}/none.pt", "--data", "{data}", "--time-rounds", "0"],
-         "time rounds must be a whole number >= 1"),
-        (["evaluate", "{out}/none.pt", "--data", "{data}", "--time-runs", "0"],
-         "--time-runs 1 or more"),
+        (["evaluate", "{bad}", "{out}/../bad.toml", "--data", "{data}"], "is given twice"),
+        (
+            ["evaluate", "{out}/none.pt", "--data", "{data}", "--time-rounds", "0"],
+            "time rounds must be a whole number >= 1",
+        ),
+        (
+            ["evaluate", "{out}/none.pt", "--data", "{data}", "--time-runs", "0"],
+            "--time-runs 1 or more",
+        ),
         (["train", "{data}", "--out", "{bad}"], "bad.toml is a file, not a folder"),
         (["train", "{data}", "--out", "{bad}/run", "--arch", "bovw"], "is a file, not a folder"),
         (["predict", "--frame", "{bad}"], "--frame with --map"),
         (["train", "{data}", "--out", "{out}", "--precision", "fp16"], "precision 'fp16'"),
-        (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--precision", "bf16"],
-         "--precision does not apply"),
+        (
+            ["train", "{data}", "--out", "{out}", "--arch", "bovw", "--precision", "bf16"],
+            "--precision does not apply",
+        ),
         (["train", "{data}", "--out", "{out}", "--stop-after-epoch", "0"], "epochs are 1 to"),
-        (["train", "{data}", "--out", "{out}", "--epochs", "3", "--stop-after-epoch", "4"],
-         "epochs are 1 to 3"),
-        (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--stop-after-epoch", "1"],
-         "--stop-after-epoch does not apply"),
-        (["train", "{data}", "--out", "{out}", "--stop-after-epoch", "1", "--cv-grid",
-          "train.lr=0.1,0.01"], "--stop-after-epoch with --cv-grid"),
+        (
+            ["train", "{data}", "--out", "{out}", "--epochs", "3", "--stop-after-epoch", "4"],
+            "epochs are 1 to 3",
+        ),
+        (
+            ["train", "{data}", "--out", "{out}", "--arch", "bovw", "--stop-after-epoch", "1"],
+            "--stop-after-epoch does not apply",
+        ),
+        (
+            [
+                "train",
+                "{data}",
+                "--out",
+                "{out}",
+                "--stop-after-epoch",
+                "1",
+                "--cv-grid",
+                "train.lr=0.1,0.01",
+            ],
+            "--stop-after-epoch with --cv-grid",
+        ),
         (["train", "{data}", "--out", "{out}", "--canvas-mm", "229"], "give the canvas as H,W"),
         (["train", "{data}", "--out", "{out}", "--canvas-mm", "0,383"], "both > 0"),
-        (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--canvas-mm", "229,383"],
-         "--canvas-mm does not apply"),
+        (
+            ["train", "{data}", "--out", "{out}", "--arch", "bovw", "--canvas-mm", "229,383"],
+            "--canvas-mm does not apply",
+        ),
         (["train", "{data}", "--out", "{out}", "--device", "gpu"], "is not a training device"),
-        (["train", "{data}", "--out", "{out}", "--distill-from", "{out}/none.pt"],
-         "no teacher checkpoint"),
-        (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--distill-from", "{bad}"],
-         "--distill-from does not apply"),
-        (["train", "{data}", "--out", "{out}", "--arch", "segnet", "--distill-from", "{bad}"],
-         "needs a classifier"),
-        (["train", "{data}", "--out", "{out}", "--distill-from", "{bad}", "--cv-grid",
-          "train.lr=0.1,0.01"], "--distill-from with --cv-grid"),
-        pytest.param(["train", "{data}", "--out", "{out}", "--device", "cuda"],
-                     "sees no CUDA GPU", marks=pytest.mark.skipif(
-                         torch.cuda.is_available(), reason="this machine has a CUDA GPU")),
-        (["train", "{data}", "--out", "{out}", "--arch", "bovw", "--device", "cuda"],
-         "--device does not apply"),
+        (
+            ["train", "{data}", "--out", "{out}", "--distill-from", "{out}/none.pt"],
+            "no teacher checkpoint",
+        ),
+        (
+            ["train", "{data}", "--out", "{out}", "--arch", "bovw", "--distill-from", "{bad}"],
+            "--distill-from does not apply",
+        ),
+        (
+            ["train", "{data}", "--out", "{out}", "--arch", "segnet", "--distill-from", "{bad}"],
+            "needs a classifier",
+        ),
+        (
+            [
+                "train",
+                "{data}",
+                "--out",
+                "{out}",
+                "--distill-from",
+                "{bad}",
+                "--cv-grid",
+                "train.lr=0.1,0.01",
+            ],
+            "--distill-from with --cv-grid",
+        ),
+        pytest.param(
+            ["train", "{data}", "--out", "{out}", "--device", "cuda"],
+            "sees no CUDA GPU",
+            marks=pytest.mark.skipif(
+                torch.cuda.is_available(), reason="this machine has a CUDA GPU"
+            ),
+        ),
+        (
+            ["train", "{data}", "--out", "{out}", "--arch", "bovw", "--device", "cuda"],
+            "--device does not apply",
+        ),
     ],
 )
 def test_errors_before_work(app, tiny_dataset, tmp_path, args, message):

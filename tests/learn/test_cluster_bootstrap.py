@@ -39,8 +39,9 @@ def test_groups_are_subjects_then_instances_then_single_samples():
 
 
 def test_weights_draw_whole_groups_within_their_stratum():
-    groups = sample_groups(np.array([0, 0, 0, 1, 2, 2, -1, -1, -1]),
-                         np.array([-1] * 6 + [10, 10, 11]))  # fmt: skip
+    groups = sample_groups(
+        np.array([0, 0, 0, 1, 2, 2, -1, -1, -1]), np.array([-1] * 6 + [10, 10, 11])
+    )
     w = sample_weights(groups, resamples=200, seed=3)
     assert np.array_equal(w, sample_weights(groups, resamples=200, seed=3))
     assert np.all(w[:, 0] == w[:, 1]) and np.all(w[:, 1] == w[:, 2]) and np.all(w[:, 4] == w[:, 5])
@@ -84,8 +85,9 @@ def test_accuracy_and_difference_against_a_slow_bootstrap():
     subject = np.repeat(np.arange(25), rng.integers(8, 30, 25))  # uneven subjects
     n_hand = len(subject)
     instance = np.repeat(100 + np.arange(60), rng.integers(2, 8, 60))
-    groups = sample_groups(np.r_[subject, -np.ones(len(instance), int)],
-                         np.r_[-np.ones(n_hand, int), instance])  # fmt: skip
+    groups = sample_groups(
+        np.r_[subject, -np.ones(len(instance), int)], np.r_[-np.ones(n_hand, int), instance]
+    )
     skill = np.r_[rng.uniform(0.6, 1.0, 25)[subject], rng.uniform(0.7, 1.0, 60)[instance - 100]]
     a = (rng.uniform(size=len(groups)) < skill).astype(float)
     b = np.where(rng.uniform(size=len(groups)) < 0.1, 1 - a, a)  # B differs on ~10 %
@@ -138,8 +140,10 @@ def test_evaluated_rows_record_their_test_subjects(checkpoints, tiny_dataset, tm
     for arch in ("handsnet", "segnet"):
         row = evaluate_checkpoint(checkpoints[arch], tiny_dataset, time_runs=3)
         idx = np.asarray(row["test_indices"])
-        want = sample_groups(reader["subject_id"][np.sort(idx)][np.argsort(np.argsort(idx))],
-                           reader["instance_id"][np.sort(idx)][np.argsort(np.argsort(idx))])
+        want = sample_groups(
+            reader["subject_id"][np.sort(idx)][np.argsort(np.argsort(idx))],
+            reader["instance_id"][np.sort(idx)][np.argsort(np.argsort(idx))],
+        )
         assert np.array_equal(row["test_groups"], want) and len(idx) == row["n_test"]
         if arch == "segnet":  # per-image matrices add up to the evaluator's pooled one
             assert np.array_equal(np.sum(row["per_image_cm"], axis=0), row["cm"])
@@ -189,10 +193,18 @@ def test_segmenter_pairs_in_the_report_section():
 
     subject, a, b = _two_segmenters()
     groups = sample_groups(subject, None)
-    rows = [{"n_test": 150, "metrics": {"mean_iou": M.mean_iou(torch.tensor(cm.sum(0)))},
-             "mean_iou_interval": [0.5, 0.6], "mean_iou_interval_groups": [0.4, 0.7],
-             "per_image_cm": cm.tolist(), "test_indices": list(range(150)),
-             "test_groups": groups.tolist()} for cm in (a, b)]  # fmt: skip
+    rows = [
+        {
+            "n_test": 150,
+            "metrics": {"mean_iou": M.mean_iou(torch.tensor(cm.sum(0)))},
+            "mean_iou_interval": [0.5, 0.6],
+            "mean_iou_interval_groups": [0.4, 0.7],
+            "per_image_cm": cm.tolist(),
+            "test_indices": list(range(150)),
+            "test_groups": groups.tolist(),
+        }
+        for cm in (a, b)
+    ]
     text = "\n".join(segmentation_markdown(rows, ["A", "B"]))
     lo, hi = grouped_mean_iou_difference_interval(a, b, groups)
     d = rows[0]["metrics"]["mean_iou"] - rows[1]["metrics"]["mean_iou"]

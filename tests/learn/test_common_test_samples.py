@@ -28,10 +28,19 @@ def write(folder: Path, episode_seed) -> Path:
     seeds differ where a press was redrawn."""
     layout, flat_mm = cylinder_sector_layout(width_mm=60, length_mm=90, pitch_mm=5)
     tmap = TactileMap.build(layout)
-    writer = DatasetWriter(folder, config={"test": "presses"}, part="sector",
-                           generator_version="t", seed=3, tmap=tmap, layout=layout)  # fmt: skip
-    rows = [{**make_sample(i, tmap, flat_mm), "episode_seed": np.uint64(episode_seed(i))}
-            for i in range(N)]  # fmt: skip
+    writer = DatasetWriter(
+        folder,
+        config={"test": "presses"},
+        part="sector",
+        generator_version="t",
+        seed=3,
+        tmap=tmap,
+        layout=layout,
+    )
+    rows = [
+        {**make_sample(i, tmap, flat_mm), "episode_seed": np.uint64(episode_seed(i))}
+        for i in range(N)
+    ]
     writer.write_chunk(0, rows)
     writer.merge()
     return folder
@@ -41,8 +50,10 @@ def write(folder: Path, episode_seed) -> Path:
 def two_skins(tmp_path_factory):
     """(skin A, skin B): B redrew every third press (another episode seed)."""
     root = tmp_path_factory.mktemp("presses")
-    return (write(root / "a", lambda i: 100 + i),
-            write(root / "b", lambda i: 100 + i + (1000 if i % 3 == 0 else 0)))  # fmt: skip
+    return (
+        write(root / "a", lambda i: 100 + i),
+        write(root / "b", lambda i: 100 + i + (1000 if i % 3 == 0 else 0)),
+    )
 
 
 def keys(folder: Path, i: int) -> tuple[int, int]:

@@ -75,16 +75,22 @@ def test_missing_compiler_is_a_clear_error():
 def test_compiled_ms_per_image_times_and_checks():
     threads = torch.get_num_threads()
     model = create_model("handsnet", input_size=SIZE).eval()
-    ms, agree = compiled_ms_per_image(fast_inference(model, bf16=False), SIZE, 1, 5,
-                                      sparse_images(6, 3))  # fmt: skip
+    ms, agree = compiled_ms_per_image(
+        fast_inference(model, bf16=False), SIZE, 1, 5, sparse_images(6, 3)
+    )
     assert 0 < ms < 1e3 and agree == 1.0
     assert torch.get_num_threads() == threads
 
 
 def row(fast: float, compiled: float | None, agree: float | None, note: str | None = None):
     ms = {"eval_mode": 9.0, "prepared": 8.0, "fast": fast, "compiled": compiled, "gpu": None}
-    return {"ms_per_image": ms, "compiled_agreement": agree, "compile_note": note,
-            "threads": 1, "bf16": False}  # fmt: skip
+    return {
+        "ms_per_image": ms,
+        "compiled_agreement": agree,
+        "compile_note": note,
+        "threads": 1,
+        "bf16": False,
+    }
 
 
 def test_tables_show_the_compiled_time_only_when_faster_and_agreeing():

@@ -6,8 +6,10 @@ from learn.curves import history_figure, plot_history
 
 
 def test_plot_history(tmp_path):
-    hist = [{"epoch": 1, "train_loss": 1.0, "val_loss": 0.9, "val_metric": 0.6},
-            {"epoch": 2, "train_loss": 0.5, "val_loss": 0.7, "val_metric": 0.8}]  # fmt: skip
+    hist = [
+        {"epoch": 1, "train_loss": 1.0, "val_loss": 0.9, "val_metric": 0.6},
+        {"epoch": 2, "train_loss": 0.5, "val_loss": 0.7, "val_metric": 0.8},
+    ]
     assert plot_history(hist, tmp_path / "c.png").stat().st_size > 1000
     metric_ax = history_figure(hist, best_epoch=2).axes[1]
     (star,) = [line for line in metric_ax.get_lines() if line.get_label().startswith("best.pt")]

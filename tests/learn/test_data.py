@@ -29,8 +29,9 @@ BASELINE, GAIN = 1000.0, 2.0  # counts, counts/Pa
 def path(tmp_path_factory):
     """20 samples (hands of 5 subjects, non-hands of 5 instances) on a layout with modules."""
     base, _ = cylinder_sector_layout(width_mm=60, length_mm=90, pitch_mm=8)
-    layout = TaxelLayout(base.positions_m, base.normals,
-                         module_ids=np.arange(base.n_taxels) // 8, name="sector")  # fmt: skip
+    layout = TaxelLayout(
+        base.positions_m, base.normals, module_ids=np.arange(base.n_taxels) // 8, name="sector"
+    )
     tmap = TactileMap.build(layout)
     rng = np.random.default_rng(5)
     samples = []
@@ -39,17 +40,31 @@ def path(tmp_path_factory):
         pressed = rng.uniform(size=layout.n_taxels) < 0.5
         p = np.round(rng.uniform(0, 800, layout.n_taxels) * pressed)
         labels = (rng.integers(1, 7, layout.n_taxels) * (p > 0) * hand).astype(np.uint8)
-        samples.append({
-            "raw": (BASELINE + GAIN * p).astype(np.uint16), "pressure_pa": p.astype(np.float32),
-            "image": tmap.image(p), "taxel_label": labels,
-            "label_image": tmap.label_image(p, labels) if hand else np.zeros(tmap.shape, np.uint8),
-            "is_hand": np.uint8(hand), "subject_id": np.int32(i // 4 if hand else -1),
-            "instance_id": np.int32(-1 if hand else i // 4),
-        })  # fmt: skip
+        samples.append(
+            {
+                "raw": (BASELINE + GAIN * p).astype(np.uint16),
+                "pressure_pa": p.astype(np.float32),
+                "image": tmap.image(p),
+                "taxel_label": labels,
+                "label_image": tmap.label_image(p, labels)
+                if hand
+                else np.zeros(tmap.shape, np.uint8),
+                "is_hand": np.uint8(hand),
+                "subject_id": np.int32(i // 4 if hand else -1),
+                "instance_id": np.int32(-1 if hand else i // 4),
+            }
+        )
     folder = tmp_path_factory.mktemp("learn") / "ds"
-    w = DatasetWriter(folder, config={}, part="sector", generator_version="t", seed=1, tmap=tmap,
-                      layout=layout, attrs={"skin_counts_per_pa": GAIN,
-                                            "skin_baseline_counts": BASELINE})  # fmt: skip
+    w = DatasetWriter(
+        folder,
+        config={},
+        part="sector",
+        generator_version="t",
+        seed=1,
+        tmap=tmap,
+        layout=layout,
+        attrs={"skin_counts_per_pa": GAIN, "skin_baseline_counts": BASELINE},
+    )
     w.write_chunk(0, samples)
     w.merge()
     return folder

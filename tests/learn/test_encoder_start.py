@@ -47,8 +47,18 @@ def test_the_segmenter_starts_from_the_classifier_trained_first(tiny_dataset, tm
     assert f"segnet: first a vgg16 classifier in {out / 'vgg16'}" in said
     assert "78 of 152 tensors loaded; classifier, decoder start fresh" in said
     # the first convolution stays one epoch from the classifier's; a twin from scratch does not
-    res = _train([tiny_dataset, "--out", tmp_path / "scratch", "--arch", "segnet", "--config",
-                  config, "--no-pretrain-encoder"])  # fmt: skip
+    res = _train(
+        [
+            tiny_dataset,
+            "--out",
+            tmp_path / "scratch",
+            "--arch",
+            "segnet",
+            "--config",
+            config,
+            "--no-pretrain-encoder",
+        ]
+    )
     assert res.exit_code == 0, res.output
     scratch = torch.load(tmp_path / "scratch" / "best.pt", weights_only=False)
     assert scratch["init"] == "random" and not (tmp_path / "scratch" / "vgg16").exists()
@@ -58,14 +68,21 @@ def test_the_segmenter_starts_from_the_classifier_trained_first(tiny_dataset, tm
     # rerun with --resume: the finished classifier is reused, not trained again
     stamp = (out / "vgg16" / "best.pt").stat().st_mtime_ns
     config.write_text(TINY.replace("epochs = 1", "epochs = 2"))
-    res = _train([tiny_dataset, "--out", out, "--arch", "segnet", "--config", config,
-                  "--resume"])  # fmt: skip
+    res = _train([tiny_dataset, "--out", out, "--arch", "segnet", "--config", config, "--resume"])
     assert res.exit_code == 0, res.output
     assert (out / "vgg16" / "best.pt").stat().st_mtime_ns == stamp
     assert torch.load(out / "last.pt", weights_only=False)["epoch"] == 2  # epochs done
     # a run from scratch resumes from scratch by default, and refuses the encoder
-    scratch_args = [tiny_dataset, "--out", tmp_path / "scratch", "--arch", "segnet", "--config",
-                    config, "--resume"]  # fmt: skip
+    scratch_args = [
+        tiny_dataset,
+        "--out",
+        tmp_path / "scratch",
+        "--arch",
+        "segnet",
+        "--config",
+        config,
+        "--resume",
+    ]
     res = _train([*scratch_args, "--pretrain-encoder"])
     assert res.exit_code != 0 and "--no-pretrain-encoder" in res.output, res.output
     res = _train(scratch_args)
@@ -73,14 +90,18 @@ def test_the_segmenter_starts_from_the_classifier_trained_first(tiny_dataset, tm
     assert not (tmp_path / "scratch" / "vgg16").exists()
 
 
-@pytest.mark.parametrize(("args", "message"), [
-    (["--arch", "handsnet"], "starts a segmenter"),
-    (["--arch", "segnet", "--init", "CKPT"], "give one of the two"),
-    (["--arch", "segnet", "--cv-grid", "train.lr=0.01,0.001"], "would not be held out"),
-    (["--arch", "bovw"], "does not apply to --arch bovw"),
-])  # fmt: skip
-def test_bad_combinations_are_refused_before_any_work(tiny_dataset, checkpoints, tmp_path, args,
-                                                      message):  # fmt: skip
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--arch", "handsnet"], "starts a segmenter"),
+        (["--arch", "segnet", "--init", "CKPT"], "give one of the two"),
+        (["--arch", "segnet", "--cv-grid", "train.lr=0.01,0.001"], "would not be held out"),
+        (["--arch", "bovw"], "does not apply to --arch bovw"),
+    ],
+)
+def test_bad_combinations_are_refused_before_any_work(
+    tiny_dataset, checkpoints, tmp_path, args, message
+):
     args = [str(checkpoints["segnet"]) if a == "CKPT" else a for a in args]
     out = tmp_path / "run"
     res = _train([tiny_dataset, "--out", out, *args, "--pretrain-encoder"])
@@ -100,5 +121,12 @@ def test_an_image_folder_is_refused_and_not_pretrained_by_default(tiny_dataset, 
     assert not wanted(None, seg, tmp_path / "imgs", None, None, tmp_path / "o", False)
     assert wanted(None, seg, tiny_dataset, None, None, tmp_path / "o", False)
     assert not wanted(None, seg, tiny_dataset, tmp_path / "x.pt", None, tmp_path / "o", False)
-    assert not wanted(None, resolve_run("handsnet", None, {}, False), tiny_dataset, None, None,
-                      tmp_path / "o", False)  # fmt: skip
+    assert not wanted(
+        None,
+        resolve_run("handsnet", None, {}, False),
+        tiny_dataset,
+        None,
+        None,
+        tmp_path / "o",
+        False,
+    )

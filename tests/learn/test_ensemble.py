@@ -37,8 +37,10 @@ def reseeded(path, tmp_path, seed: int):
     """A copy of a checkpoint with every float weight moved by seeded noise: another network."""
     ckpt = load_checkpoint(path)
     gen = torch.Generator().manual_seed(seed)
-    ckpt["model"] = {k: v + 0.05 * torch.randn(v.shape, generator=gen) if v.is_floating_point()
-                     else v for k, v in ckpt["model"].items()}  # fmt: skip
+    ckpt["model"] = {
+        k: v + 0.05 * torch.randn(v.shape, generator=gen) if v.is_floating_point() else v
+        for k, v in ckpt["model"].items()
+    }
     return save_checkpoint(ckpt, tmp_path / f"reseeded{seed}.pt")
 
 
@@ -61,8 +63,9 @@ def test_mean_softmax_is_the_mean_of_the_members():
     x = torch.randn(4, 5)
     out = MeanSoftmax(nets)(x)
     with torch.no_grad():
-        expected = sum(np.exp(n(x).numpy()) / np.exp(n(x).numpy()).sum(1, keepdims=True)
-                       for n in nets) / 3  # fmt: skip
+        expected = (
+            sum(np.exp(n(x).numpy()) / np.exp(n(x).numpy()).sum(1, keepdims=True) for n in nets) / 3
+        )
     np.testing.assert_allclose(out.exp().detach().numpy(), expected, rtol=1e-5)
     with pytest.raises(ConfigError, match="two or more"):
         MeanSoftmax(nets[:1])
@@ -77,8 +80,9 @@ def test_members_that_cannot_share_an_input_are_refused(checkpoints, fcn, tmp_pa
         load_members([fcn])
     ckpt = load_checkpoint(fcn)
     model = dict(ckpt["config"]["model"], input_size=[24, 36])
-    other = save_checkpoint(dict(ckpt, config=dict(ckpt["config"], model=model)),
-                            tmp_path / "small.pt")  # fmt: skip
+    other = save_checkpoint(
+        dict(ckpt, config=dict(ckpt["config"], model=model)), tmp_path / "small.pt"
+    )
     with pytest.raises(ConfigError, match=r"input size .* Fix"):
         load_members([checkpoints["segnet"], other])
 
@@ -93,8 +97,11 @@ def test_evaluate_ensemble_matches_a_numpy_reference(checkpoints, tiny_dataset, 
     the FCN alone on every pixel there, and the check could not tell the mean from it."""
     paths = [checkpoints["segnet"], reseeded(checkpoints["segnet"], tmp_path, 1)]
     _, run = model_from_checkpoint(load_checkpoint(paths[0]))
-    test = materialize(open_split(tiny_dataset, "test", "segment", run.model.input_size, None,
-                                  run.train.seed), "test", False)  # fmt: skip
+    test = materialize(
+        open_split(tiny_dataset, "test", "segment", run.model.input_size, None, run.train.seed),
+        "test",
+        False,
+    )
     differs = dict.fromkeys(paths, False)
     for tta, views in ((False, (0,)), (True, (0, 1, 2))):
         row = evaluate_ensemble(paths, tiny_dataset, time_runs=2, tta=tta)
@@ -108,7 +115,9 @@ def test_evaluate_ensemble_matches_a_numpy_reference(checkpoints, tiny_dataset, 
             one[test.x[:, 0].numpy() == 0] = 0
             differs[alone] = differs[alone] or bool((one != pred).any())
         assert row["arch"] == "ensemble" and [m["arch"] for m in row["members"]] == [
-            "segnet", "segnet"]
+            "segnet",
+            "segnet",
+        ]
         assert row["tta_views"] == ([0, 1, 2] if tta else None)
         assert row["ms_per_image"]["fast"] > 0
     assert all(differs.values())  # the check can tell the mean from either network alone
@@ -118,8 +127,17 @@ def test_cli_evaluate_and_predict_with_an_ensemble(checkpoints, fcn, tiny_datase
     app = typer.Typer()
     register(app)
     md = tmp_path / "r.md"
-    args = ["evaluate", str(checkpoints["handsnet"]), str(checkpoints["segnet"]), str(fcn),
-            "--data", str(tiny_dataset), "--report", str(md), "--ensemble"]  # fmt: skip
+    args = [
+        "evaluate",
+        str(checkpoints["handsnet"]),
+        str(checkpoints["segnet"]),
+        str(fcn),
+        "--data",
+        str(tiny_dataset),
+        "--report",
+        str(md),
+        "--ensemble",
+    ]
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
     rows = json.loads(md.with_suffix(".json").read_text())
@@ -128,9 +146,19 @@ def test_cli_evaluate_and_predict_with_an_ensemble(checkpoints, fcn, tiny_datase
     assert "| mean of SegNet + FCN |" in text and "Ensemble: scores and times" in text
     # One network per task: nothing to average, refused before any report is written.
     md2 = tmp_path / "r2.md"
-    res = CliRunner().invoke(app, ["evaluate", str(checkpoints["handsnet"]),
-                                   str(checkpoints["segnet"]), "--data", str(tiny_dataset),
-                                   "--report", str(md2), "--ensemble"])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        [
+            "evaluate",
+            str(checkpoints["handsnet"]),
+            str(checkpoints["segnet"]),
+            "--data",
+            str(tiny_dataset),
+            "--report",
+            str(md2),
+            "--ensemble",
+        ],
+    )
     assert res.exit_code == 2 and "1 classify, 1 segment" in res.output, res.output
     assert not md2.exists()
 
@@ -141,11 +169,35 @@ def test_cli_evaluate_and_predict_with_an_ensemble(checkpoints, fcn, tiny_datase
     mean = sum(load_predictor(p).logits(image).softmax(0) for p in (checkpoints["handsnet"], other))
     torch.testing.assert_close(both.logits(image).softmax(0), mean / 2, atol=1e-4, rtol=1e-4)
     png = tmp_path / "pred.png"
-    res = CliRunner().invoke(app, ["predict", "--data", str(tiny_dataset), "--index", "3",
-                                   "--segmenter", str(checkpoints["segnet"]), "--segmenter",
-                                   str(fcn), "--png", str(png)])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        [
+            "predict",
+            "--data",
+            str(tiny_dataset),
+            "--index",
+            "3",
+            "--segmenter",
+            str(checkpoints["segnet"]),
+            "--segmenter",
+            str(fcn),
+            "--png",
+            str(png),
+        ],
+    )
     assert res.exit_code == 0 and png.exists(), res.output
-    res = CliRunner().invoke(app, ["predict", "--data", str(tiny_dataset), "--index", "3",
-                                   "--segmenter", str(checkpoints["segnet"]), "--segmenter",
-                                   str(checkpoints["handsnet"])])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        [
+            "predict",
+            "--data",
+            str(tiny_dataset),
+            "--index",
+            "3",
+            "--segmenter",
+            str(checkpoints["segnet"]),
+            "--segmenter",
+            str(checkpoints["handsnet"]),
+        ],
+    )
     assert res.exit_code == 2 and "differ in task" in res.output, res.output

@@ -67,12 +67,25 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     assert sum(map(sum, clf["cm"])) == 16 and clf["ms_per_image"]["fast"] > 0
     assert abs(clf["fast_metrics"]["accuracy"] - clf["metrics"]["accuracy"]) <= 0.005
     text = write_report(rows, tmp_path / "report.md", "tiny").read_text()
-    known = (paper.HANDSNET_ACCURACY_PCT, paper.HANDSNET_MS_PER_IMAGE, paper.SEGNET_ACC_PCT,
-             paper.SEGNET_MIOU_PCT, paper.SEGNET_MS_PER_IMAGE)
-    for needle in ("paper", *(f"{v:.2f}" for v in known), "unknown", "not run",
-                   f"{100 * clf['metrics']['accuracy']:.2f}", "% of each true class",
-                   "Accuracy by contact size", "mIoU (%) of coarser groupings",
-                   "mirror pairs merged", "The same predictions on the hand's pixels"):
+    known = (
+        paper.HANDSNET_ACCURACY_PCT,
+        paper.HANDSNET_MS_PER_IMAGE,
+        paper.SEGNET_ACC_PCT,
+        paper.SEGNET_MIOU_PCT,
+        paper.SEGNET_MS_PER_IMAGE,
+    )
+    for needle in (
+        "paper",
+        *(f"{v:.2f}" for v in known),
+        "unknown",
+        "not run",
+        f"{100 * clf['metrics']['accuracy']:.2f}",
+        "% of each true class",
+        "Accuracy by contact size",
+        "mIoU (%) of coarser groupings",
+        "mirror pairs merged",
+        "The same predictions on the hand's pixels",
+    ):
         assert needle in text, needle
     # the hand-pixel table: the share of hand pixels, and the scores of the hand pixels alone
     seg_cm = np.asarray(seg["cm"])
@@ -86,8 +99,9 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     per_bin = clf["by_active_taxels"]
     for c, name in enumerate(clf["class_names"]):
         n = sum(b["per_class"][name]["n"] for b in per_bin)
-        right = sum(b["per_class"][name]["n"] * (b["per_class"][name]["accuracy"] or 0)
-                    for b in per_bin)  # fmt: skip
+        right = sum(
+            b["per_class"][name]["n"] * (b["per_class"][name]["accuracy"] or 0) for b in per_bin
+        )
         assert n == sum(clf["cm"][c]) and round(right) == clf["cm"][c][c]
     # so does the one by press force, from the dataset's force_n
     with DatasetReader(tiny_dataset) as reader:
@@ -95,11 +109,15 @@ def test_evaluate_checkpoint_and_report(checkpoints, tiny_dataset, tmp_path):
     for c, name in enumerate(clf["class_names"]):
         assert sum(b["per_class"][name]["n"] for b in clf["by_force"]) == sum(clf["cm"][c])
     assert [b["n"] for b in clf["by_force"]] == [
-        int(np.sum((force >= b["lo"]) & (force < (b["hi"] or np.inf)))) for b in clf["by_force"]]
+        int(np.sum((force >= b["lo"]) & (force < (b["hi"] or np.inf)))) for b in clf["by_force"]
+    ]
     assert "Accuracy by press force" in text and "| 40+ N |" in text
     forces = seg["segmentation_by_group"]["press force"]
-    assert [g["group"] for g in forces] == [g for g in ("0–5 N", "5–10 N", "10–20 N", "20–40 N",
-                                            "40+ N") if g in {f["group"] for f in forces}]
+    assert [g["group"] for g in forces] == [
+        g
+        for g in ("0–5 N", "5–10 N", "10–20 N", "20–40 N", "40+ N")
+        if g in {f["group"] for f in forces}
+    ]
     assert sum(g["n"] for g in forces) == seg["n_test"]
     # so does the contactor breakdown (this dataset stores no contactor field: one "unknown")
     groups = clf["by_contactor"]
@@ -132,8 +150,11 @@ def test_report_tells_models_of_one_method_apart(checkpoints, tiny_dataset, tmp_
     number and naming its training data; one "trained on" line per model in the details."""
     row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3)
     assert row["train_data"]["path"] == row["test_data"] == str(tiny_dataset)
-    other = dict(row, train_data={"path": "/data/forearm3x", "n_train": 6300},
-                 metrics=dict(row["metrics"], accuracy=0.5))  # fmt: skip
+    other = dict(
+        row,
+        train_data={"path": "/data/forearm3x", "n_train": 6300},
+        metrics=dict(row["metrics"], accuracy=0.5),
+    )
     text = write_report([row, other], tmp_path / "r.md").read_text()
     name = tiny_dataset.name
     n = row["train_data"]["n_train"]
@@ -149,18 +170,27 @@ def test_report_tells_models_of_one_method_apart(checkpoints, tiny_dataset, tmp_
     assert ", b |" in same.read_text()  # same data too: the run folder tells them apart
 
 
-def test_report_of_one_task_states_the_other_tasks_paper_values(checkpoints, tiny_dataset,
-                                                                 tmp_path):
+def test_report_of_one_task_states_the_other_tasks_paper_values(
+    checkpoints, tiny_dataset, tmp_path
+):
     """A classifier-only report gives Table 8 as one sentence with the paper's SegNet values,
     not a table of rows that were not run; a segmenter-only one does the same for Table 3."""
     for arch, empty, values, absent, listed in (
-            ("handsnet", "No segmenter was scored",
-             (paper.SEGNET_ACC_PCT, paper.SEGNET_MIOU_PCT, paper.SEGNET_MS_PER_IMAGE),
-             ("| SegNet |", "| FCN |"), "| BoVW | not run |"),
-            ("segnet", "No classifier was scored",
-             (paper.HANDSNET_ACCURACY_PCT, paper.HANDSNET_MS_PER_IMAGE),
-             ("| HandsNet |", "| VGG16 fine-tuned |", "| BoVW |"),
-             "| FCN | not run |")):  # fmt: skip
+        (
+            "handsnet",
+            "No segmenter was scored",
+            (paper.SEGNET_ACC_PCT, paper.SEGNET_MIOU_PCT, paper.SEGNET_MS_PER_IMAGE),
+            ("| SegNet |", "| FCN |"),
+            "| BoVW | not run |",
+        ),
+        (
+            "segnet",
+            "No classifier was scored",
+            (paper.HANDSNET_ACCURACY_PCT, paper.HANDSNET_MS_PER_IMAGE),
+            ("| HandsNet |", "| VGG16 fine-tuned |", "| BoVW |"),
+            "| FCN | not run |",
+        ),
+    ):
         row = evaluate_checkpoint(checkpoints[arch], tiny_dataset, time_runs=2)
         text = write_report([row], tmp_path / f"{arch}.md").read_text()
         (line,) = [ln for ln in text.splitlines() if ln.startswith(empty)]
@@ -179,8 +209,9 @@ def _model_and_test_split(ckpt_path, data):
     return model, split, materialize(split, "test", False)
 
 
-def test_rows_of_one_evaluate_read_the_test_split_once(checkpoints, tiny_dataset, tmp_path,
-                                                       monkeypatch):
+def test_rows_of_one_evaluate_read_the_test_split_once(
+    checkpoints, tiny_dataset, tmp_path, monkeypatch
+):
     """Rows that share data and input read the test split once; the tensors equal a fresh read
     (`open_split` + `materialize`); other data, another input size or a rewritten dataset
     read afresh."""
@@ -193,8 +224,9 @@ def test_rows_of_one_evaluate_read_the_test_split_once(checkpoints, tiny_dataset
 
     reads = []
     real = learn.folder.materialize
-    monkeypatch.setattr(learn.folder, "materialize",
-                        lambda ds, *a, **k: reads.append(len(ds)) or real(ds, *a, **k))  # fmt: skip
+    monkeypatch.setattr(
+        learn.folder, "materialize", lambda ds, *a, **k: reads.append(len(ds)) or real(ds, *a, **k)
+    )
     copy = shutil.copytree(tiny_dataset, tmp_path / "copy")
     _, run = model_from_checkpoint(load_checkpoint(checkpoints["handsnet"]))
     _, fresh_split, fresh = _model_and_test_split(checkpoints["handsnet"], tiny_dataset)
@@ -230,9 +262,12 @@ def test_errors_most_confident_first_and_their_sheet(checkpoints, tiny_dataset, 
 
     ckpt = load_checkpoint(checkpoints["handsnet"])  # noisy weights: a classifier that errs
     gen = torch.Generator().manual_seed(5)
-    ckpt["model"] = {k: v + 0.3 * torch.randn(v.shape, generator=gen) * v.std()
-                     if v.is_floating_point() and v.numel() > 1 else v
-                     for k, v in ckpt["model"].items()}  # fmt: skip
+    ckpt["model"] = {
+        k: v + 0.3 * torch.randn(v.shape, generator=gen) * v.std()
+        if v.is_floating_point() and v.numel() > 1
+        else v
+        for k, v in ckpt["model"].items()
+    }
     noisy = save_checkpoint(ckpt, tmp_path / "noisy" / "best.pt")
     row = evaluate_checkpoint(noisy, tiny_dataset, time_runs=2)
     model, split, test = _model_and_test_split(noisy, tiny_dataset)
@@ -242,17 +277,20 @@ def test_errors_most_confident_first_and_their_sheet(checkpoints, tiny_dataset, 
     assert len(wrong) > 0, "the noisy classifier should err on the tiny test split"
     expected = sorted(wrong, key=lambda k: -p[k].max())
     assert [e["index"] for e in row["errors"]] == [int(split.indices[k]) for k in expected]
-    np.testing.assert_allclose([e["probability"] for e in row["errors"]],
-                               [p[k].max() for k in expected], rtol=1e-5)  # fmt: skip
+    np.testing.assert_allclose(
+        [e["probability"] for e in row["errors"]], [p[k].max() for k in expected], rtol=1e-5
+    )
     names = row["class_names"]
-    assert all(e["true"] == names[int(test.y[k])] for e, k in zip(row["errors"], expected,
-                                                                     strict=True))  # fmt: skip
+    assert all(
+        e["true"] == names[int(test.y[k])] for e, k in zip(row["errors"], expected, strict=True)
+    )
     app = typer.Typer()
     register(app)
     md = tmp_path / "rep" / "r.md"
     md.parent.mkdir()
-    res = CliRunner().invoke(app, ["evaluate", str(noisy), "--data", str(tiny_dataset),
-                                   "--report", str(md)])  # fmt: skip
+    res = CliRunner().invoke(
+        app, ["evaluate", str(noisy), "--data", str(tiny_dataset), "--report", str(md)]
+    )
     assert res.exit_code == 0, res.output
     sheet = md.parent / "r_errors_HandsNet.png"
     assert sheet.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -280,8 +318,9 @@ def test_segmenter_worst_images_and_their_sheet(checkpoints, tiny_dataset, tmp_p
     miou = [mean_iou(confusion_matrix(y[k], pred[k], 7)) for k in range(len(y))]
     images = row["worst"]["images"]
     assert len(images) == min(len(y), 50)
-    np.testing.assert_allclose([w["mean_iou"] for w in images], sorted(miou)[:len(images)],
-                               atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        [w["mean_iou"] for w in images], sorted(miou)[: len(images)], atol=1e-12
+    )
     maps = unpack_labels(row["worst"]["maps"])
     assert len(maps) == min(len(y), 9)
     for w, m in zip(images, maps, strict=False):  # each map is its image's prediction
@@ -290,8 +329,9 @@ def test_segmenter_worst_images_and_their_sheet(checkpoints, tiny_dataset, tmp_p
     app = typer.Typer()
     register(app)
     md = tmp_path / "r.md"
-    res = CliRunner().invoke(app, ["evaluate", str(ckpt), "--data", str(tiny_dataset),
-                                   "--report", str(md)])  # fmt: skip
+    res = CliRunner().invoke(
+        app, ["evaluate", str(ckpt), "--data", str(tiny_dataset), "--report", str(md)]
+    )
     assert res.exit_code == 0, res.output
     sheet = tmp_path / "r_errors_SegNet.png"
     assert sheet.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -302,8 +342,15 @@ def test_segmenter_worst_images_and_their_sheet(checkpoints, tiny_dataset, tmp_p
 def test_report_json_keeps_every_value_and_puts_number_lists_on_one_line():
     from learn.eval_report import report_json
 
-    rows = [{"cm": [[1, -2], [3e-05, 4.5]], "names": ["a", "1"], "x": float("nan"),
-             "per_image_cm": [[[0, 1], [2, 3]]] * 3, "nested": {"v": [1.0, -1e20]}}]  # fmt: skip
+    rows = [
+        {
+            "cm": [[1, -2], [3e-05, 4.5]],
+            "names": ["a", "1"],
+            "x": float("nan"),
+            "per_image_cm": [[[0, 1], [2, 3]]] * 3,
+            "nested": {"v": [1.0, -1e20]},
+        }
+    ]
     text = report_json(rows)
     back = json.loads(text)
     assert back[0]["x"] != back[0]["x"]  # NaN survives

@@ -41,13 +41,17 @@ def args_of(command: str, data, out) -> list[str]:
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a CUDA GPU")
 @pytest.mark.parametrize("command", COMMANDS)
-@pytest.mark.parametrize(("device", "message"), [("cuda", "sees no CUDA GPU. Fix: --device cpu"),
-                                                 ("tpu", "is not a training device")])
-def test_an_unusable_device_is_refused_before_any_work(app, tiny_dataset, tmp_path, command,
-                                                       device, message):  # fmt: skip
+@pytest.mark.parametrize(
+    ("device", "message"),
+    [("cuda", "sees no CUDA GPU. Fix: --device cpu"), ("tpu", "is not a training device")],
+)
+def test_an_unusable_device_is_refused_before_any_work(
+    app, tiny_dataset, tmp_path, command, device, message
+):
     out = tmp_path / "out"
-    res = CliRunner().invoke(app, ["experiment", command, *args_of(command, tiny_dataset, out),
-                                   "--device", device])  # fmt: skip
+    res = CliRunner().invoke(
+        app, ["experiment", command, *args_of(command, tiny_dataset, out), "--device", device]
+    )
     assert res.exit_code == 2, res.output
     assert message in " ".join(res.output.split()), res.output
     assert not out.exists()
@@ -76,19 +80,35 @@ def fit_devices(monkeypatch) -> list[str]:
 @pytest.mark.parametrize("plan", [FULL_PLAN, QUICK_PLAN], ids=["preset", "quick"])
 def test_robustness_networks_train_on_the_plans_device(fit_devices, tiny_dataset, tmp_path, plan):
     with pytest.raises(Trained):
-        resolve_model("handsnet", tiny_dataset, tmp_path, None,
-                      dataclasses.replace(plan, device="cuda:0"), 0, False)  # fmt: skip
+        resolve_model(
+            "handsnet",
+            tiny_dataset,
+            tmp_path,
+            None,
+            dataclasses.replace(plan, device="cuda:0"),
+            0,
+            False,
+        )
     assert fit_devices == ["cuda:0"]
 
 
-def test_fault_aware_networks_train_on_the_plans_device(fit_devices, checkpoints, tiny_dataset,
-                                                        tmp_path):  # fmt: skip
+def test_fault_aware_networks_train_on_the_plans_device(
+    fit_devices, checkpoints, tiny_dataset, tmp_path
+):
     """Whatever device the plain network's own run named."""
     plan = dataclasses.replace(QUICK_FA.eval.plan, device="cuda:0")
     scale = dataclasses.replace(QUICK_FA, eval=dataclasses.replace(QUICK_FA.eval, plan=plan))
     with pytest.raises(Trained):
-        fault_aware_model(checkpoints["handsnet"], tiny_dataset, tmp_path / "fa", epochs=1,
-                          n_train=8, scale=scale, seed=0, progress=False)  # fmt: skip
+        fault_aware_model(
+            checkpoints["handsnet"],
+            tiny_dataset,
+            tmp_path / "fa",
+            epochs=1,
+            n_train=8,
+            scale=scale,
+            seed=0,
+            progress=False,
+        )
     assert fit_devices == ["cuda:0"]
 
 
@@ -96,8 +116,9 @@ def test_transfer_and_fidelity_runs_name_the_device(fit_devices):
     s, model = TransferSettings(device="cuda:0"), T.RunConfig().model  # HandsNet's preset
     assert pretrain_run(model, s).device == finetune_run(model, s, scratch=True).device == "cuda:0"
     assert pretrain_run(model, TransferSettings()).device == "cpu"
-    plan = FidelityPlan(n=8, epochs=1, image_px=(34, 50), workers=1, seed=0, segnet=False,
-                        device="cuda:0")  # fmt: skip
+    plan = FidelityPlan(
+        n=8, epochs=1, image_px=(34, 50), workers=1, seed=0, segnet=False, device="cuda:0"
+    )
     assert probe_run("handsnet", plan).device == "cuda:0"
 
 

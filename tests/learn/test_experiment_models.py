@@ -25,8 +25,13 @@ def test_a_stopped_run_resumes_instead_of_being_reused(tiny_dataset, tmp_path):
     """A model whose training was cut short (here paused after epoch 1 of 2; a killed run
     leaves the same files) is continued to the end, and ends as an uninterrupted run does."""
     run = preset_run("handsnet", epochs=2, seed=0)
-    stopped = fit(run, load_data(tiny_dataset, run, progress=False), tmp_path / "a" / "handsnet",
-                  progress=False, stop_after_epoch=1)  # fmt: skip
+    stopped = fit(
+        run,
+        load_data(tiny_dataset, run, progress=False),
+        tmp_path / "a" / "handsnet",
+        progress=False,
+        stop_after_epoch=1,
+    )
     assert stopped.paused and (tmp_path / "a" / "handsnet" / "best.pt").is_file()
     resumed = ensure_model("handsnet", tiny_dataset, tmp_path / "a", epochs=2, progress=False)
     whole = ensure_model("handsnet", tiny_dataset, tmp_path / "b", epochs=2, progress=False)

@@ -53,8 +53,9 @@ def test_no_faults_gives_the_clean_images(hand_frame):
 
 def test_blind_spot_copy_is_the_drawn_corruption(hand_frame):
     tmap, _, p, labels = hand_frame
-    mix = FaultMix(p_blind=1.0, p_dead=0.0, p_drift=0.0, p_removal=0.0, radius_mm=(15.0, 15.0),
-                   n_spots=(3, 3))  # fmt: skip
+    mix = FaultMix(
+        p_blind=1.0, p_dead=0.0, p_drift=0.0, p_removal=0.0, radius_mm=(15.0, 15.0), n_spots=(3, 3)
+    )
     image, truth = faulty_copy(p, labels, tmap, None, [], mix, np.random.default_rng(4))
     replay = np.random.default_rng(4)
     replay.random(), replay.integers(3, 4), replay.uniform(15.0, 15.0)
@@ -68,11 +69,13 @@ def test_blind_spot_copy_is_the_drawn_corruption(hand_frame):
 
 def test_removal_copy_is_imaged_through_a_pool_map(hand_frame):
     tmap, layout, p, labels = hand_frame
-    mix = FaultMix(p_blind=0.0, p_dead=0.0, p_drift=0.0, p_removal=1.0, fractions=(0.3, 0.6),
-                   pool_patterns=1)  # fmt: skip
+    mix = FaultMix(
+        p_blind=0.0, p_dead=0.0, p_drift=0.0, p_removal=1.0, fractions=(0.3, 0.6), pool_patterns=1
+    )
     pool = removal_pool(tmap, layout, mix, seed=0)
-    assert [len(m.keep) for m in pool] == [tmap.n_taxels - round(f * tmap.n_taxels)
-                                           for f in (0.3, 0.6)]  # fmt: skip
+    assert [len(m.keep) for m in pool] == [
+        tmap.n_taxels - round(f * tmap.n_taxels) for f in (0.3, 0.6)
+    ]
     image, truth = faulty_copy(p, labels, tmap, None, pool, mix, np.random.default_rng(1))
     shapes = {m.tmap.shape for m in pool}
     assert image.shape in shapes and truth.shape == image.shape
@@ -104,17 +107,31 @@ def test_augmented_data_adds_seeded_faulty_copies(tiny_dataset, tiny_run):
 
 
 def test_fault_aware_end_to_end(tiny_dataset, checkpoints, tmp_path):
-    scale = FaultAwareScale(Scale(1, None, 4, n_spots=(2,), radii_mm=(20.0,),
-                                  fractions=(0.0, 0.6)), epochs=(1, 1), n_train=(8, 8),
-                            copies=1)  # fmt: skip
-    report = run_fault_aware(tiny_dataset, tmp_path, scale=scale, seed=3,
-                             classifier=checkpoints["handsnet"], segmenter=checkpoints["segnet"],
-                             threads=1, progress=False)  # fmt: skip
+    scale = FaultAwareScale(
+        Scale(1, None, 4, n_spots=(2,), radii_mm=(20.0,), fractions=(0.0, 0.6)),
+        epochs=(1, 1),
+        n_train=(8, 8),
+        copies=1,
+    )
+    report = run_fault_aware(
+        tiny_dataset,
+        tmp_path,
+        scale=scale,
+        seed=3,
+        classifier=checkpoints["handsnet"],
+        segmenter=checkpoints["segnet"],
+        threads=1,
+        progress=False,
+    )
     text = report.read_text()
     assert "HandsNet fault-aware" in text and "SegNet fault-aware" in text
     assert "Table 13" in text and "92.67" in text and "Table 14" in text
-    for png in ("fa_removal_classification.png", "fa_removal_segmentation.png",
-                "fa_spots_classification.png", "fa_spots_segmentation.png"):
+    for png in (
+        "fa_removal_classification.png",
+        "fa_removal_segmentation.png",
+        "fa_spots_classification.png",
+        "fa_spots_segmentation.png",
+    ):
         img = imread(tmp_path / png)
         assert img[..., :3].std() > 0.02
     res = json.loads((tmp_path / "results.json").read_text())["results"]
@@ -129,16 +146,33 @@ def test_fault_aware_end_to_end(tiny_dataset, checkpoints, tmp_path):
     assert res["trained"][0]["minutes"] == pytest.approx(sum(r["seconds"] for r in hist) / 60)
     assert [t["resumed"] for t in res["trained"]] == [False, False]
     with pytest.raises(ConfigError, match="made otherwise"):  # another recipe, same folder
-        fault_aware_model(checkpoints["handsnet"], tiny_dataset,
-                          tmp_path / "models" / "handsnet_fault_aware", epochs=2, n_train=8,
-                          scale=scale, seed=3, progress=False)  # fmt: skip
+        fault_aware_model(
+            checkpoints["handsnet"],
+            tiny_dataset,
+            tmp_path / "models" / "handsnet_fault_aware",
+            epochs=2,
+            n_train=8,
+            scale=scale,
+            seed=3,
+            progress=False,
+        )
 
 
 def test_cli_refuses_bad_settings_before_any_work(tiny_dataset, tmp_path):
     app = typer.Typer()
     app.callback()(lambda: None)  # a group, as `handskin experiment` is
     register(app)
-    res = CliRunner().invoke(app, ["fault-aware", "--out", str(tmp_path / "o"), "--data",
-                                   str(tiny_dataset), "--lr-factor", "0"])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        [
+            "fault-aware",
+            "--out",
+            str(tmp_path / "o"),
+            "--data",
+            str(tiny_dataset),
+            "--lr-factor",
+            "0",
+        ],
+    )
     assert res.exit_code == 2 and "lr factor > 0" in res.output
     assert not (tmp_path / "o").exists()

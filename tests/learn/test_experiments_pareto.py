@@ -23,9 +23,17 @@ from learn.train import load_data
 from tactile.dataset.reader import DatasetReader
 from tactile.resize import resize_image
 
-TINY = P.ParetoSettings(sizes=("24x36", "full"), widths=(0.125,), seg_widths=(),
-                        seg_sizes=("24x36",), budget_min=5.0, max_steps=2, max_test=None,
-                        time_runs=2, threads=1)  # fmt: skip
+TINY = P.ParetoSettings(
+    sizes=("24x36", "full"),
+    widths=(0.125,),
+    seg_widths=(),
+    seg_sizes=("24x36",),
+    budget_min=5.0,
+    max_steps=2,
+    max_test=None,
+    time_runs=2,
+    threads=1,
+)
 
 
 def dominated(ms: np.ndarray, score: np.ndarray, i: int) -> bool:
@@ -42,8 +50,10 @@ def test_pareto_mask_matches_brute_force():
         ms = rng.integers(1, 6, 12).astype(float)  # few values: ties in time and in score
         score = rng.integers(0, 5, 12).astype(float)
         score[rng.random(12) < 0.1] = np.nan
-        expected = [np.isfinite(score[i]) and not dominated(ms, np.nan_to_num(score, nan=-1), i)
-                    for i in range(12)]  # fmt: skip
+        expected = [
+            np.isfinite(score[i]) and not dominated(ms, np.nan_to_num(score, nan=-1), i)
+            for i in range(12)
+        ]
         assert pareto_mask(ms, score).tolist() == expected
 
 
@@ -64,8 +74,10 @@ def test_train_budgeted_stops_at_max_steps_and_is_seeded(tiny_dataset, tiny_run)
     b, _ = train_budgeted(run, train, budget_s=600, max_steps=3)
     assert info["steps"] == 3 and info["images"] == 24
     assert info["epochs"] == pytest.approx(24 / (3 * len(train.y)))
-    assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values(),
-                                                 strict=True))  # fmt: skip
+    assert all(
+        torch.equal(x, y)
+        for x, y in zip(a.state_dict().values(), b.state_dict().values(), strict=True)
+    )
     _, none = train_budgeted(run, train, budget_s=0.0, max_steps=3)
     assert none["steps"] == 0
 
@@ -75,8 +87,9 @@ def independent_accuracy(ckpt_path, dataset) -> tuple[float, int]:
     model, run = model_from_checkpoint(load_checkpoint(ckpt_path))
     with DatasetReader(dataset) as ds:
         idx = ds.splits["test"]
-        images = [resize_image(ds.image[i].astype(np.float32) / 255, run.model.input_size)
-                  for i in idx]  # fmt: skip
+        images = [
+            resize_image(ds.image[i].astype(np.float32) / 255, run.model.input_size) for i in idx
+        ]
         truth = ds.is_hand[:][idx]
     with torch.no_grad():
         pred = model(torch.from_numpy(np.stack(images))[:, None]).argmax(1).numpy()
@@ -86,8 +99,14 @@ def independent_accuracy(ckpt_path, dataset) -> tuple[float, int]:
 @pytest.fixture(scope="module")
 def pareto_run(tiny_dataset, checkpoints, tmp_path_factory):
     out = tmp_path_factory.mktemp("pareto")
-    res = P.run_pareto(tiny_dataset, out, TINY, classifier=checkpoints["handsnet"],
-                       segmenter=checkpoints["segnet"], progress=False)  # fmt: skip
+    res = P.run_pareto(
+        tiny_dataset,
+        out,
+        TINY,
+        classifier=checkpoints["handsnet"],
+        segmenter=checkpoints["segnet"],
+        progress=False,
+    )
     return out, res
 
 
@@ -97,9 +116,16 @@ def test_pareto_end_to_end(pareto_run, tiny_dataset, checkpoints):
     with DatasetReader(tiny_dataset) as ds:
         h, w = ds.image.shape[1:]
         n_hand_test = int((ds.is_hand[:][ds.splits["test"]] == 1).sum())
-    expected = {"HandsNet 32×48", "HandsNet 24×36", f"HandsNet {h}×{w}", "VGG16 w0.125 32×48",
-                "BoVW (80 words)", "VGG16 w0.125 + SVM", "SegNet w0.125 32×48",
-                "SegNet w0.125 24×36"}  # fmt: skip
+    expected = {
+        "HandsNet 32×48",
+        "HandsNet 24×36",
+        f"HandsNet {h}×{w}",
+        "VGG16 w0.125 32×48",
+        "BoVW (80 words)",
+        "VGG16 w0.125 + SVM",
+        "SegNet w0.125 32×48",
+        "SegNet w0.125 24×36",
+    }
     assert set(rows) == expected
     # the given classifier is used as is: its score is an independent evaluation's
     acc, n_test = independent_accuracy(checkpoints["handsnet"], tiny_dataset)
@@ -128,8 +154,17 @@ def test_pareto_end_to_end(pareto_run, tiny_dataset, checkpoints):
 def test_pareto_report_and_charts(pareto_run):
     out, _ = pareto_run
     text = (out / "report.md").read_text()
-    for needle in ("## Classification", "## Segmentation", "| HandsNet 24×36 |", "97.81",
-                   "89.17", "HandsNet (paper)", "unknown", "VGG16 w1", "Seed: 0"):  # fmt: skip
+    for needle in (
+        "## Classification",
+        "## Segmentation",
+        "| HandsNet 24×36 |",
+        "97.81",
+        "89.17",
+        "HandsNet (paper)",
+        "unknown",
+        "VGG16 w1",
+        "Seed: 0",
+    ):
         assert needle in text, needle
     for png in ("pareto_classification.png", "pareto_segmentation.png"):
         img = imread(out / png)[..., :3]
@@ -141,27 +176,54 @@ def test_pareto_rerun_reuses_trained_variants(pareto_run, tiny_dataset, checkpoi
     out, _ = pareto_run
     path = out / "models" / "handsnet-24x36" / "best.pt"
     before = path.stat().st_mtime_ns
-    settings = P.ParetoSettings(**{**TINY.__dict__, "classic": False, "segmentation": False,
-                                   "sizes": ("24x36",), "widths": ()})  # fmt: skip
-    res = P.run_pareto(tiny_dataset, out / "again", settings, classifier=checkpoints["handsnet"],
-                       models_dir=out / "models", progress=False)  # fmt: skip
+    settings = P.ParetoSettings(
+        **{
+            **TINY.__dict__,
+            "classic": False,
+            "segmentation": False,
+            "sizes": ("24x36",),
+            "widths": (),
+        }
+    )
+    res = P.run_pareto(
+        tiny_dataset,
+        out / "again",
+        settings,
+        classifier=checkpoints["handsnet"],
+        models_dir=out / "models",
+        progress=False,
+    )
     assert f"reusing {path}" in capsys.readouterr().out and path.stat().st_mtime_ns == before
     assert [r["name"] for r in res["rows"]] == ["HandsNet 32×48", "HandsNet 24×36"]
 
 
-def test_pareto_also_scores_given_checkpoints_as_they_are(pareto_run, tiny_dataset, checkpoints,
-                                                         tmp_path):  # fmt: skip
+def test_pareto_also_scores_given_checkpoints_as_they_are(
+    pareto_run, tiny_dataset, checkpoints, tmp_path
+):
     """An --also checkpoint of the main's architecture and size is a row of its own (named
     after its run folder), scored as given: the same score as the same weights as main."""
     out, _ = pareto_run
     given = tmp_path / "wide" / "best.pt"
     given.parent.mkdir()
     shutil.copy(checkpoints["handsnet"], given)
-    settings = P.ParetoSettings(**{**TINY.__dict__, "classic": False, "segmentation": False,
-                                   "sizes": ("24x36",), "widths": ()})  # fmt: skip
-    res = P.run_pareto(tiny_dataset, tmp_path / "out", settings,
-                       classifier=checkpoints["handsnet"], models_dir=out / "models",
-                       also=[given], progress=False)  # fmt: skip
+    settings = P.ParetoSettings(
+        **{
+            **TINY.__dict__,
+            "classic": False,
+            "segmentation": False,
+            "sizes": ("24x36",),
+            "widths": (),
+        }
+    )
+    res = P.run_pareto(
+        tiny_dataset,
+        tmp_path / "out",
+        settings,
+        classifier=checkpoints["handsnet"],
+        models_dir=out / "models",
+        also=[given],
+        progress=False,
+    )
     rows = {r["name"]: r for r in res["rows"]}
     assert set(rows) == {"HandsNet 32×48", "HandsNet 32×48 (wide)", "HandsNet 24×36"}
     assert rows["HandsNet 32×48 (wide)"]["training"].startswith("given")

@@ -66,17 +66,36 @@ def sensed_dataset(tiny_dataset, tmp_path_factory):
         signal = raw - base - drift * t
         p = np.where(signal > 3 * NOISE, signal, 0.0) / GAIN
         hand = bool(s["is_hand"])
-        samples.append({
-            "raw": raw, "pressure_pa": s["pressure_pa"], "taxel_label": s["taxel_label"],
-            "image": tmap.image(p), "is_hand": s["is_hand"], "time_s": np.float32(t),
-            "label_image": tmap.label_image(p, s["taxel_label"]) if hand else
-            np.zeros(tmap.shape, np.uint8),
-            "subject_id": s["subject_id"], "instance_id": s["instance_id"]})  # fmt: skip
+        samples.append(
+            {
+                "raw": raw,
+                "pressure_pa": s["pressure_pa"],
+                "taxel_label": s["taxel_label"],
+                "image": tmap.image(p),
+                "is_hand": s["is_hand"],
+                "time_s": np.float32(t),
+                "label_image": tmap.label_image(p, s["taxel_label"])
+                if hand
+                else np.zeros(tmap.shape, np.uint8),
+                "subject_id": s["subject_id"],
+                "instance_id": s["instance_id"],
+            }
+        )
     folder = tmp_path_factory.mktemp("robust") / "sensed"
-    writer = DatasetWriter(folder, config={"episode": {"skin": {"noise_std_counts": NOISE}}},
-                           part="sector", generator_version="t", seed=3, tmap=tmap, layout=layout,
-                           attrs={"skin_counts_per_pa": GAIN, "skin_baseline_counts": base,
-                                  "skin_drift_counts_per_s": drift})  # fmt: skip
+    writer = DatasetWriter(
+        folder,
+        config={"episode": {"skin": {"noise_std_counts": NOISE}}},
+        part="sector",
+        generator_version="t",
+        seed=3,
+        tmap=tmap,
+        layout=layout,
+        attrs={
+            "skin_counts_per_pa": GAIN,
+            "skin_baseline_counts": base,
+            "skin_drift_counts_per_s": drift,
+        },
+    )
     writer.write_chunk(0, samples)
     writer.merge()
     return folder
@@ -85,8 +104,10 @@ def sensed_dataset(tiny_dataset, tmp_path_factory):
 @pytest.fixture(scope="module")
 def predictors(checkpoints):
     """The eval-mode networks (predictions exactly those of learn.evaluate)."""
-    return [E.Predictor.load("HandsNet", checkpoints["handsnet"], fast=False),
-            E.Predictor.load("SegNet", checkpoints["segnet"], fast=False)]  # fmt: skip
+    return [
+        E.Predictor.load("HandsNet", checkpoints["handsnet"], fast=False),
+        E.Predictor.load("SegNet", checkpoints["segnet"], fast=False),
+    ]
 
 
 def all_frames(path):
@@ -180,8 +201,9 @@ def slow_blind_spot_cms(frames, predictors, blind, blind_px):
     clf, seg = predictors
     pred_c = clf.predict(net_inputs(imgs[frames.classify], clf.size, "classify"))
     cm_c = M.confusion_matrix(frames.is_hand[frames.classify], pred_c, 2)
-    truth = np.stack([label_image(frames.tmap, p[r], frames.taxel_label[r])
-                      for r in frames.segment])  # fmt: skip
+    truth = np.stack(
+        [label_image(frames.tmap, p[r], frames.taxel_label[r]) for r in frames.segment]
+    )
     truth[:, blind_px] = 0
     pred_s = seg.predict(net_inputs(imgs[frames.segment], seg.size, "segment"))
     cm_s = M.confusion_matrix(resize_labels(truth, seg.size), pred_s, 7)
@@ -211,9 +233,13 @@ def test_removal_study_zero_row_and_nesting(sensed_dataset, predictors):
     seg = predictors[1]
     truth = frames.label_image.copy()
     truth[:, ~frames.tmap.coverage()] = IGNORE
-    out = E.run_rows(frames.tmap, frames.pressure_pa[frames.segment],
-                     np.zeros(len(frames.segment), bool), np.ones(len(frames.segment), bool),
-                     predictors)  # fmt: skip
+    out = E.run_rows(
+        frames.tmap,
+        frames.pressure_pa[frames.segment],
+        np.zeros(len(frames.segment), bool),
+        np.ones(len(frames.segment), bool),
+        predictors,
+    )
     cm = M.confusion_matrix(resize_labels(truth, seg.size), out.seg["SegNet"], 7, IGNORE)
     assert zero["cm"]["SegNet"][0] == cm.tolist()
     n = frames.tmap.n_taxels
@@ -237,8 +263,14 @@ def test_plans_change_only_what_they_say():
 
 
 def tiny_scale(**kw) -> Scale:
-    base = {"n_patterns": 1, "n_classify": None, "n_segment": 4, "n_spots": (1, 3),
-            "radii_mm": (10.0, 20.0), "fractions": (0.0, 0.5)}  # fmt: skip
+    base = {
+        "n_patterns": 1,
+        "n_classify": None,
+        "n_segment": 4,
+        "n_spots": (1, 3),
+        "radii_mm": (10.0, 20.0),
+        "fractions": (0.0, 0.5),
+    }
     return Scale(**{**base, **kw})
 
 
@@ -248,10 +280,16 @@ def chart_is_drawn(path) -> bool:
 
 
 def test_robustness_a_end_to_end(sensed_dataset, checkpoints, tmp_path):
-    report = run_robustness_a(sensed_dataset, tmp_path, scale=tiny_scale(), seed=1,
-                              classifier=checkpoints["handsnet"],
-                              segmenter=checkpoints["segnet"], threads=1,
-                              progress=False)  # fmt: skip
+    report = run_robustness_a(
+        sensed_dataset,
+        tmp_path,
+        scale=tiny_scale(),
+        seed=1,
+        classifier=checkpoints["handsnet"],
+        segmenter=checkpoints["segnet"],
+        threads=1,
+        progress=False,
+    )
     text = report.read_text()
     assert "Table 11" in text and "Table 12" in text and "| N_s \\ r | 10 mm | 20 mm |" in text
     for png in ("heatmap_classification.png", "heatmap_segmentation.png"):
@@ -263,19 +301,34 @@ def test_robustness_a_end_to_end(sensed_dataset, checkpoints, tmp_path):
 
 
 def test_robustness_b_end_to_end_trains_missing_networks(sensed_dataset, tmp_path, capsys):
-    plan = TrainPlan(epochs=1, n_train=8, seg_n_train=8, flips=False, seg_width=0.125,
-                     input_size=(32, 48), suffix="_tiny")  # fmt: skip
+    plan = TrainPlan(
+        epochs=1,
+        n_train=8,
+        seg_n_train=8,
+        flips=False,
+        seg_width=0.125,
+        input_size=(32, 48),
+        suffix="_tiny",
+    )
     scale = tiny_scale(plan=plan, n_classify=6)
-    report = run_robustness_b(sensed_dataset, tmp_path, scale=scale, seed=2, threads=1,
-                              progress=False)  # fmt: skip
+    report = run_robustness_b(
+        sensed_dataset, tmp_path, scale=scale, seed=2, threads=1, progress=False
+    )
     text = report.read_text()
     assert "Table 13" in text and "Table 14" in text and "unknown" in text
     assert "97.81" in text  # the paper's intact-skin accuracy (Table 3) on the 0 % row
     for png in ("removal_classification.png", "removal_segmentation.png"):
         assert chart_is_drawn(tmp_path / png)
     stamp = (tmp_path / "models" / "handsnet_tiny" / "best.pt").stat().st_mtime
-    run_robustness_b(sensed_dataset, tmp_path / "again", scale=scale, seed=2,
-                     models_dir=tmp_path / "models", threads=1, progress=False)  # fmt: skip
+    run_robustness_b(
+        sensed_dataset,
+        tmp_path / "again",
+        scale=scale,
+        seed=2,
+        models_dir=tmp_path / "models",
+        threads=1,
+        progress=False,
+    )
     assert "reusing" in capsys.readouterr().out
     assert (tmp_path / "models" / "handsnet_tiny" / "best.pt").stat().st_mtime == stamp
     res = json.loads((tmp_path / "results.json").read_text())["results"]
@@ -290,16 +343,27 @@ def experiment_app() -> typer.Typer:
 
 
 def test_cli_errors_name_the_problem(tmp_path):
-    res = CliRunner().invoke(experiment_app(), ["robustness-a", "--out", str(tmp_path / "o"),
-                                                "--data", str(tmp_path / "missing")])  # fmt: skip
+    res = CliRunner().invoke(
+        experiment_app(),
+        ["robustness-a", "--out", str(tmp_path / "o"), "--data", str(tmp_path / "missing")],
+    )
     assert res.exit_code == 2 and "no dataset at" in res.output
     assert not (tmp_path / "o").exists()
 
 
 def test_cli_rejects_a_segmenter_given_as_classifier(tmp_path, checkpoints, sensed_dataset):
-    res = CliRunner().invoke(experiment_app(), ["robustness-b", "--out", str(tmp_path / "o"),
-                                                "--data", str(sensed_dataset), "--classifier",
-                                                str(checkpoints["segnet"])])  # fmt: skip
+    res = CliRunner().invoke(
+        experiment_app(),
+        [
+            "robustness-b",
+            "--out",
+            str(tmp_path / "o"),
+            "--data",
+            str(sensed_dataset),
+            "--classifier",
+            str(checkpoints["segnet"]),
+        ],
+    )
     assert res.exit_code == 2 and "holds a segnet network" in res.output
 
 
@@ -315,8 +379,10 @@ def test_zero_corruption_keeps_a_models_canvas(sensed_dataset, checkpoints, tmp_
         model = dict(ckpt["config"]["model"], canvas_mm=canvas)
         paths[arch] = tmp_path / f"{arch}.pt"
         torch.save(dict(ckpt, config=dict(ckpt["config"], model=model)), paths[arch])
-    preds = [E.Predictor.load("HandsNet", paths["handsnet"], fast=False),
-             E.Predictor.load("SegNet", paths["segnet"], fast=False)]  # fmt: skip
+    preds = [
+        E.Predictor.load("HandsNet", paths["handsnet"], fast=False),
+        E.Predictor.load("SegNet", paths["segnet"], fast=False),
+    ]
     frames = all_frames(sensed_dataset)
     assert frames.tmap.shape[0] > canvas[0] and frames.tmap.shape[1] < canvas[1]
     _, cms = E.zero_corruption(frames, preds)
@@ -325,8 +391,14 @@ def test_zero_corruption_keeps_a_models_canvas(sensed_dataset, checkpoints, tmp_
     plain = evaluate_tensors(model, load_data(sensed_dataset, run, progress=False).test, 2)
     assert cms["HandsNet"] == plain.cm.tolist()
     seg, seg_run = model_from_checkpoint(load_checkpoint(paths["segnet"]))
-    ds = TorchTactileDataset(sensed_dataset, "test", "segment", seg_run.model.input_size, False,
-                             canvas_mm=seg_run.model.canvas_mm)  # fmt: skip
+    ds = TorchTactileDataset(
+        sensed_dataset,
+        "test",
+        "segment",
+        seg_run.model.input_size,
+        False,
+        canvas_mm=seg_run.model.canvas_mm,
+    )
     ds.indices = frames.sample_ids[frames.segment]
     plain_seg = evaluate_tensors(seg, materialize(ds, progress=False), 7)
     assert cms["SegNet"] == plain_seg.cm.tolist()

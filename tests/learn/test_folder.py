@@ -76,8 +76,12 @@ def test_taislab_hand_vs_rest(shared_data):
     if not (root / "images").is_dir():
         pytest.skip(f"TaISLab images not found at {root / 'images'}")
     torch.set_num_threads(1)
-    run = RunConfig(model=ModelConfig("handsnet", 2, input_size=(28, 50)),
-                    train=TrainConfig(epochs=3, batch_size=32), flips=False, threads=1)  # fmt: skip
+    run = RunConfig(
+        model=ModelConfig("handsnet", 2, input_size=(28, 50)),
+        train=TrainConfig(epochs=3, batch_size=32),
+        flips=False,
+        threads=1,
+    )
     data = load_data(root, run, hand_classes=("hand", "finger"))
     assert data.class_names == ("non_hand", "hand") and len(data.test.y) == 330
     result = fit(run, data, None, progress=False)

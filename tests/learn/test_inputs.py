@@ -21,8 +21,8 @@ from tactile.errors import DataError
 
 def test_net_input_by_task_on_a_closed_form_case():
     """A single lit pixel of an (8, 8) image halved to (4, 4): the blur spreads it over the
-    output, the segmentation input keeps only the pixel whose centre-rule source is lit, at no
-less than the image's smallest positive value."""
+        output, the segmentation input keeps only the pixel whose centre-rule source is lit, at no
+    less than the image's smallest positive value."""
     img = np.zeros((8, 8), np.float32)
     img[3, 5] = 1.0  # output (1, 2) samples source (floor(1.5 * 2), floor(2.5 * 2)) = (3, 5)
     blur = net_input(img, (4, 4), "classify")

@@ -19,8 +19,9 @@ from learn.predict import load_predictor, read_sample
 from learn.quantize import calibration_images, int8_supported, quantize_int8
 from tactile.errors import ConfigError, DataError
 
-pytestmark = pytest.mark.skipif(not int8_supported(), reason="PyTorch without the oneDNN "
-                                "quantized engine")  # fmt: skip
+pytestmark = pytest.mark.skipif(
+    not int8_supported(), reason="PyTorch without the oneDNN quantized engine"
+)
 
 
 def _app() -> tuple[typer.Typer, CliRunner]:
@@ -69,8 +70,9 @@ def test_evaluate_scores_the_file_as_int8(checkpoints, tiny_dataset, int8_file, 
     float checkpoint, the report saying where its ranges came from."""
     app, runner = _app()
     md = tmp_path / "r.md"
-    res = runner.invoke(app, ["evaluate", str(int8_file), "--data", str(tiny_dataset),
-                              "--report", str(md)])  # fmt: skip
+    res = runner.invoke(
+        app, ["evaluate", str(int8_file), "--data", str(tiny_dataset), "--report", str(md)]
+    )
     assert res.exit_code == 0, res.output
     (row,) = json.loads(md.with_suffix(".json").read_text())
     assert row["int8"]["saved"] and row["int8"]["calibration_data"] == str(tiny_dataset)
@@ -92,15 +94,58 @@ def test_bad_input_refused(checkpoints, tiny_dataset, int8_file, tmp_path):
         (["quantize", hn, "--out", hn], "the checkpoint itself"),
         (["quantize", hn, "--out", str(float_copy)], "not written over"),
         (["quantize", hn, "--out", str(tmp_path / "q.pt"), "--images", "8"], "at least 16"),
-        (["quantize", hn, "--out", str(tmp_path / "q.pt"), "--calibration",
-          str(tmp_path / "nope")], "not found"),
-        (["predict", "--data", str(tiny_dataset), "--index", "3", "--classifier",
-          str(int8_file), "--int8", "--calibration", str(tiny_dataset)], "drop --calibration"),
-        (["evaluate", str(int8_file), hn, "--data", str(tiny_dataset), "--ensemble",
-          "--report", str(tmp_path / "e.md")], "an ensemble averages float networks"),
-        (["evaluate", str(int8_file), "--data", str(tiny_dataset), "--int8",
-          "--report", str(tmp_path / "e.md")], "scored as int8 without it"),
-    ):  # fmt: skip
+        (
+            [
+                "quantize",
+                hn,
+                "--out",
+                str(tmp_path / "q.pt"),
+                "--calibration",
+                str(tmp_path / "nope"),
+            ],
+            "not found",
+        ),
+        (
+            [
+                "predict",
+                "--data",
+                str(tiny_dataset),
+                "--index",
+                "3",
+                "--classifier",
+                str(int8_file),
+                "--int8",
+                "--calibration",
+                str(tiny_dataset),
+            ],
+            "drop --calibration",
+        ),
+        (
+            [
+                "evaluate",
+                str(int8_file),
+                hn,
+                "--data",
+                str(tiny_dataset),
+                "--ensemble",
+                "--report",
+                str(tmp_path / "e.md"),
+            ],
+            "an ensemble averages float networks",
+        ),
+        (
+            [
+                "evaluate",
+                str(int8_file),
+                "--data",
+                str(tiny_dataset),
+                "--int8",
+                "--report",
+                str(tmp_path / "e.md"),
+            ],
+            "scored as int8 without it",
+        ),
+    ):
         res = runner.invoke(app, args)
         assert res.exit_code == 2 and message in res.output, (args, res.output)
     assert float_copy.read_bytes() == before

@@ -59,8 +59,9 @@ def as_generated(folder, **changes):
     return folder
 
 
-def test_generated_sets_share_subjects_across_parts_and_instances_across_seeds(tiny_dataset,
-                                                                              tmp_path):
+def test_generated_sets_share_subjects_across_parts_and_instances_across_seeds(
+    tiny_dataset, tmp_path
+):
     """The generator's subjects depend on (seed, id), its instances on the id alone: another part
     of one seed can share both, another seed only the instances."""
     with DatasetReader(tiny_dataset) as ds:
@@ -93,8 +94,12 @@ def test_report_flags_scores_that_are_not_held_out(tiny_dataset, checkpoints, tm
     own = row["shared_with_training"]  # its own split, checked: no person on both sides
     assert own["test_samples"] == own["own_split_samples"] == 0 and own["n_test"] == len(own_test)
     clean = resplit(tiny_dataset, tmp_path / "clean", own_test)  # same split, other folder
-    assert evaluate_checkpoint(checkpoints["handsnet"], clean,
-                               time_runs=2)["shared_with_training"]["test_samples"] == 0
+    assert (
+        evaluate_checkpoint(checkpoints["handsnet"], clean, time_runs=2)["shared_with_training"][
+            "test_samples"
+        ]
+        == 0
+    )
     leaky = resplit(tiny_dataset, tmp_path / "leaky", np.sort(np.r_[own_test, train[:8]]))
     bad = evaluate_checkpoint(checkpoints["handsnet"], leaky, time_runs=2)
     with DatasetReader(tiny_dataset) as ds:
@@ -105,8 +110,10 @@ def test_report_flags_scores_that_are_not_held_out(tiny_dataset, checkpoints, tm
     assert bad["shared_with_training"]["test_samples"] == expected >= 8
     text = write_report([bad], tmp_path / "r.md").read_text()
     assert f"**Not held out**: {expected} of the {len(test)} test samples" in text
-    kinds = (("subjects", any(subject[i] in seen_s for i in test)),
-             ("object instances", any(instance[i] in seen_i for i in test)))
+    kinds = (
+        ("subjects", any(subject[i] in seen_s for i in test)),
+        ("object instances", any(instance[i] in seen_i for i in test)),
+    )
     what = " or ".join(w for w, hit in kinds if hit)
     assert what and f"not held out: {expected} test samples share its {what} |" in text
 
@@ -154,21 +161,32 @@ def test_a_model_started_from_a_leaky_checkpoint_is_flagged(tiny_dataset, tiny_r
     fit(run, load_data(other, run), tmp_path / "pre", progress=False)
     with pytest.warns(UserWarning, match="will not be held out"):
         check_init(run, tmp_path / "pre" / "best.pt", tiny_dataset)
-    fit(run, load_data(tiny_dataset, run), tmp_path / "ft", progress=False,
-        init_from=tmp_path / "pre" / "best.pt")  # fmt: skip
+    fit(
+        run,
+        load_data(tiny_dataset, run),
+        tmp_path / "ft",
+        progress=False,
+        init_from=tmp_path / "pre" / "best.pt",
+    )
     row = evaluate_checkpoint(tmp_path / "ft" / "best.pt", tiny_dataset, time_runs=2)
     expected = _expected_hits(tiny_dataset, [np.setdiff1d(np.arange(n), train[::2])], test)
     assert row["shared_with_training"]["test_samples"] == expected > 0
     assert "**Not held out**" in write_report([row], tmp_path / "r.md").read_text()
     # the same network started from one trained on the tiny set itself is held out
-    fit(run, load_data(tiny_dataset, run), tmp_path / "ft2", progress=False,
-        init_from=tmp_path / "ft" / "best.pt")  # fmt: skip
+    fit(
+        run,
+        load_data(tiny_dataset, run),
+        tmp_path / "ft2",
+        progress=False,
+        init_from=tmp_path / "ft" / "best.pt",
+    )
     row2 = evaluate_checkpoint(tmp_path / "ft2" / "best.pt", tiny_dataset, time_runs=2)
     assert row2["shared_with_training"]["test_samples"] == expected  # the grandparent's data
 
 
-def test_the_train_command_reads_its_init_checkpoint_once(tiny_dataset, checkpoints, tmp_path,
-                                                           monkeypatch):
+def test_the_train_command_reads_its_init_checkpoint_once(
+    tiny_dataset, checkpoints, tmp_path, monkeypatch
+):
     """--init is checked before the data load; fit reuses that checkpoint for its weights and its
     lineage rather than reading the file again (it was read three times)."""
     import torch
@@ -183,9 +201,20 @@ def test_the_train_command_reads_its_init_checkpoint_once(tiny_dataset, checkpoi
     register(app)
     config = tmp_path / "run.toml"
     config.write_text("threads = 1\n[model]\ninput_size = [32, 48]\n[train]\nepochs = 1\n")
-    res = CliRunner().invoke(app, ["train", str(tiny_dataset), "--config", str(config),
-                                   "--no-progress", "--out", str(tmp_path / "ft"),
-                                   "--init", str(checkpoints["handsnet"])])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        [
+            "train",
+            str(tiny_dataset),
+            "--config",
+            str(config),
+            "--no-progress",
+            "--out",
+            str(tmp_path / "ft"),
+            "--init",
+            str(checkpoints["handsnet"]),
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert reads.count(str(checkpoints["handsnet"])) == 1, reads
     ft = load(tmp_path / "ft" / "best.pt", weights_only=False)
@@ -193,8 +222,9 @@ def test_the_train_command_reads_its_init_checkpoint_once(tiny_dataset, checkpoi
     assert ft["ancestry"] == [load(checkpoints["handsnet"], weights_only=False)["data"]]
 
 
-def test_init_loading_nothing_is_refused_and_a_vgg_encoder_loads(tiny_dataset, tiny_run,
-                                                                 checkpoints, tmp_path):
+def test_init_loading_nothing_is_refused_and_a_vgg_encoder_loads(
+    tiny_dataset, tiny_run, checkpoints, tmp_path
+):
     import pytest
 
     from learn.finetune import check_init
@@ -221,9 +251,13 @@ def test_a_segmenter_is_judged_on_the_hands_it_is_scored_on(tiny_dataset, checkp
     mixed = resplit(tiny_dataset, tmp_path / "mixed", np.sort(np.r_[own_test, objects]))
     seg = evaluate_checkpoint(checkpoints["segnet"], mixed, time_runs=2)
     assert seg["n_test"] == int(is_hand[own_test].sum())
-    assert seg["shared_with_training"] == {"subjects": [], "instances": [], "test_samples": 0,
-                                           "n_test": seg["n_test"],
-                                           "own_split_samples": 0}  # fmt: skip
+    assert seg["shared_with_training"] == {
+        "subjects": [],
+        "instances": [],
+        "test_samples": 0,
+        "n_test": seg["n_test"],
+        "own_split_samples": 0,
+    }
     cls = evaluate_checkpoint(checkpoints["handsnet"], mixed, time_runs=2)
     assert cls["shared_with_training"]["test_samples"] >= len(objects)
     # so does --init: a warning for the classifier, none for the segmenter
@@ -286,15 +320,39 @@ def test_training_on_a_split_by_sample_warns(tiny_dataset, tmp_path):
     config.write_text("threads = 1\n[model]\ninput_size = [32, 48]\n[train]\nepochs = 1\n")
     n = len(train) + len(test)
     others = [np.setdiff1d(np.arange(n), mixed)]
-    for arch, scored, start in (("handsnet", mixed, []),
-                                ("segnet", mixed[hand[mixed]], ["--no-pretrain-encoder"])):
-        res = CliRunner().invoke(app, ["train", str(copy), "--out", str(tmp_path / arch),
-                                       "--arch", arch, "--config", str(config), "--no-progress",
-                                       *start])  # fmt: skip
+    for arch, scored, start in (
+        ("handsnet", mixed, []),
+        ("segnet", mixed[hand[mixed]], ["--no-pretrain-encoder"]),
+    ):
+        res = CliRunner().invoke(
+            app,
+            [
+                "train",
+                str(copy),
+                "--out",
+                str(tmp_path / arch),
+                "--arch",
+                arch,
+                "--config",
+                str(config),
+                "--no-progress",
+                *start,
+            ],
+        )
         assert res.exit_code == 0, res.output
         expected = _expected_hits(tiny_dataset, others, scored)
         assert f"warning: {expected} of the {len(scored)} test samples of {copy}" in res.stderr
-    res = CliRunner().invoke(app, ["train", str(tiny_dataset), "--out", str(tmp_path / "clean"),
-                                   "--config", str(config), "--no-progress"])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        [
+            "train",
+            str(tiny_dataset),
+            "--out",
+            str(tmp_path / "clean"),
+            "--config",
+            str(config),
+            "--no-progress",
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "warning" not in res.stderr

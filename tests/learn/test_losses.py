@@ -93,8 +93,9 @@ def test_ce_dice_is_the_sum_of_mean_nll_and_soft_dice_by_loops():
     start = torch.zeros(1, 3, 4, 5, requires_grad=True)
     start.data[:, 0] = 5.0
     SegmentationLoss("ce_dice")(start, target[:1]).backward()
-    assert (start.grad[:, 1:][torch.nn.functional.one_hot(target[:1], 3).movedim(-1, 1)[:, 1:] > 0]
-            < 0).all()
+    assert (
+        start.grad[:, 1:][torch.nn.functional.one_hot(target[:1], 3).movedim(-1, 1)[:, 1:] > 0] < 0
+    ).all()
 
 
 @pytest.mark.parametrize("soft", [False, True])

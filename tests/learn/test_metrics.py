@@ -130,10 +130,12 @@ def test_scores_without_background_equal_scores_on_the_hand_pixels(seed):
     t, p = truth[hand], pred[hand]
     parts = [c for c in range(1, 7) if (t == c).any()]
     ious = {c: np.sum((t == c) & (p == c)) / np.sum((t == c) | (p == c)) for c in parts}
-    want = {"pixel_accuracy": np.mean(t == p),
-            "mean_accuracy": np.mean([np.mean(p[t == c] == c) for c in parts]),
-            "mean_iou": np.mean(list(ious.values())),
-            "fw_iou": sum(np.sum(t == c) * ious[c] for c in parts) / t.size}  # fmt: skip
+    want = {
+        "pixel_accuracy": np.mean(t == p),
+        "mean_accuracy": np.mean([np.mean(p[t == c] == c) for c in parts]),
+        "mean_iou": np.mean(list(ious.values())),
+        "fw_iou": sum(np.sum(t == c) * ious[c] for c in parts) / t.size,
+    }
     for name, value in want.items():
         assert got[name] == pytest.approx(value), name
     assert cm[0].sum() > 0 and without_true_class(cm)[0].sum() == 0  # the input is untouched

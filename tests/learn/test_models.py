@@ -91,7 +91,10 @@ def test_handsnet_is_table_1():
     assert count_parameters(model) == 670_338  # pinned: Table 1 at 68 × 100, padding 1
     convs = [m for m in model.modules() if isinstance(m, nn.Conv2d)]
     assert [(c.out_channels, c.kernel_size[0]) for c in convs] == [
-        (32, 7), (64, 5), (128, 3), (256, 3)
+        (32, 7),
+        (64, 5),
+        (128, 3),
+        (256, 3),
     ]
     drops = [m.p for m in model.modules() if isinstance(m, nn.Dropout)]
     assert drops == [0.1, 0.2, 0.6, 0.5]
@@ -115,8 +118,11 @@ def test_handsnet_zero_init_output_starts_every_image_at_even_odds():
     # the same layer is Glorot-random otherwise, and only the last layer is touched
     other = create_model("handsnet", **HANDSNET_PAPER.model.kwargs())
     assert torch.count_nonzero(other.classifier[-1].weight) == other.classifier[-1].weight.numel()
-    assert all(torch.count_nonzero(p) > 0 for n, p in model.named_parameters()
-               if n.endswith("weight") and not n.startswith("classifier.7"))  # fmt: skip
+    assert all(
+        torch.count_nonzero(p) > 0
+        for n, p in model.named_parameters()
+        if n.endswith("weight") and not n.startswith("classifier.7")
+    )
 
 
 def test_handsnet_dropout_scale_multiplies_the_papers_rates_and_keeps_the_layers():
@@ -128,7 +134,8 @@ def test_handsnet_dropout_scale_multiplies_the_papers_rates_and_keeps_the_layers
         drops = [m.p for m in model.modules() if isinstance(m, nn.Dropout)]
         assert drops == pytest.approx([0.1 * k, 0.2 * k, 0.6 * k, 0.5 * k])
         assert [(n, t.shape) for n, t in model.state_dict().items()] == [
-            (n, t.shape) for n, t in paper.state_dict().items()]  # one checkpoint format
+            (n, t.shape) for n, t in paper.state_dict().items()
+        ]  # one checkpoint format
     # with no dropout, a training-mode pass with batch norm frozen draws nothing: it equals eval
     model = HandsNet(dropout_scale=0.0).eval()
     for m in model.modules():
@@ -153,7 +160,9 @@ def test_segnet_decoder_mirrors_encoder():
     model = create_model("segnet", num_classes=7, width=1.0)
     convs = [m for m in model.decoder.modules() if isinstance(m, nn.Conv2d)] + [model.classifier]
     assert [c.out_channels for c in convs] == [512] * 3 + [512, 512, 256] + [256, 256, 128] + [
-        128, 64] + [64, 7]
+        128,
+        64,
+    ] + [64, 7]
     assert isinstance(model.unpool, nn.MaxUnpool2d)
 
 
@@ -205,8 +214,12 @@ def reference_vgg(state: dict[str, torch.Tensor], x: torch.Tensor) -> torch.Tens
             bn = f"features.{index + 1}."
             if bn + "running_mean" in state:
                 x = nn.functional.batch_norm(
-                    x, state[bn + "running_mean"], state[bn + "running_var"],
-                    state[bn + "weight"], state[bn + "bias"], eps=1e-5,
+                    x,
+                    state[bn + "running_mean"],
+                    state[bn + "running_var"],
+                    state[bn + "weight"],
+                    state[bn + "bias"],
+                    eps=1e-5,
                 )
                 index += 1
             x, index = torch.relu(x), index + 2
@@ -216,8 +229,13 @@ def reference_vgg(state: dict[str, torch.Tensor], x: torch.Tensor) -> torch.Tens
 
 @pytest.mark.parametrize(
     ("file_bn", "model_bn", "width"),
-    [(False, False, 0.125), (False, True, 0.125), (True, False, 0.125), (True, True, 0.125),
-     (True, True, 1.0)],
+    [
+        (False, False, 0.125),
+        (False, True, 0.125),
+        (True, False, 0.125),
+        (True, True, 0.125),
+        (True, True, 1.0),
+    ],
 )
 def test_load_vgg_weights_from_file(tmp_path, file_bn, model_bn, width):
     state = torchvision_vgg16_state(file_bn, width)
@@ -301,8 +319,9 @@ def test_load_weights_across_architectures_and_class_counts(tmp_path):
     report = load_weights(target, tmp_path / "ckpt.pt")
     assert report.loaded and all(k.startswith("encoder.") for k in report.loaded)
     assert not [k for k in target.state_dict() if k.startswith("encoder.") and k in report.missing]
-    torch.testing.assert_close(target.encoder.stages[0][0][0].weight,
-                               source.encoder.stages[0][0][0].weight)
+    torch.testing.assert_close(
+        target.encoder.stages[0][0][0].weight, source.encoder.stages[0][0][0].weight
+    )
     other = make("vgg16", num_classes=7)
     assert load_weights(other, source.state_dict()).shape_mismatch == ("fc8.weight", "fc8.bias")
     with pytest.raises(DataError, match="checkpoint"):
@@ -341,7 +360,7 @@ def test_lr_factor_selectors():
 def test_vgg_svm_separates_dark_from_bright():
     rng = np.random.default_rng(0)
     levels = np.repeat([0.2, 0.7], 20)
-    images = (255 * np.clip(levels[:, None, None] + 0.1 * rng.random((40, 20, 30)), 0, 1))
+    images = 255 * np.clip(levels[:, None, None] + 0.1 * rng.random((40, 20, 30)), 0, 1)
     labels = np.repeat([0, 1], 20)
     torch.manual_seed(0)
     clf = VggSvmClassifier(make("vgg16", num_classes=2), VggSvmConfig(batch_size=16))

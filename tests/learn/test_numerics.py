@@ -43,7 +43,8 @@ def test_importing_learn_flushes_in_workers_and_within_flushing_only(module):
     ``flushing``), the calling thread only inside ``flushing`` (all are 0 there), and numpy on
     the calling thread keeps IEEE arithmetic after it (sim/ and tactile/ rely on it)."""
     outside, inside, numpy_after = _subnormals_left(
-        f"import {module}\nfrom learn.numerics import flushing")
+        f"import {module}\nfrom learn.numerics import flushing"
+    )
     assert 0 < outside < 1 << 24
     assert inside == 0
     assert numpy_after == 1 << 24
@@ -78,8 +79,18 @@ def test_check_script_counts_subnormals_from_bits(doc_script):
     script = doc_script("check_subnormals")
     # subnormal: the smallest, ~1e-38, a negative one, the largest; then 1.18e-38 (the smallest
     # normal), 1, +0, -0, inf, nan
-    bits = [0x00000001, 0x006CE3EE, 0x80000100, 0x007FFFFF,
-            0x00800000, 0x3F800000, 0x00000000, 0x80000000, 0x7F800000, 0x7FC00000]  # fmt: skip
+    bits = [
+        0x00000001,
+        0x006CE3EE,
+        0x80000100,
+        0x007FFFFF,
+        0x00800000,
+        0x3F800000,
+        0x00000000,
+        0x80000000,
+        0x7F800000,
+        0x7FC00000,
+    ]
 
     def value(b: int) -> float:  # IEEE 754 binary32, decoded in float64 (exact for these)
         sign, exponent, mantissa = -1.0 if b >> 31 else 1.0, (b >> 23) & 0xFF, b & 0x7FFFFF

@@ -137,8 +137,13 @@ def test_resume_refuses_another_precision(tiny_dataset, tiny_run, tmp_path, monk
     data = load_data(tiny_dataset, run)
     fit(run, data, tmp_path / "cut", progress=False, stop_after_epoch=1)
     with pytest.raises(ConfigError, match="another configuration"):
-        fit(dataclasses.replace(run, precision="bf16"), data, tmp_path / "cut", resume=True,
-            progress=False)  # fmt: skip
+        fit(
+            dataclasses.replace(run, precision="bf16"),
+            data,
+            tmp_path / "cut",
+            resume=True,
+            progress=False,
+        )
 
 
 def test_bf16_support_means_native_bf16_on_x86():

@@ -129,10 +129,12 @@ def test_ground_truth_segmentation_backprojects_to_the_dataset_labels(tiny_datas
     hands = np.flatnonzero(ds.is_hand[:])[:3]
     for i in hands:
         sample = read_sample(tiny_dataset, int(i))
-        pred = attach_taxels(Prediction(sample.image, segmentation=sample.true_segmentation),
-                             sample.tmap, sample.pressure)
-        reference = slow_backproject(sample.tmap, sample.true_segmentation,
-                                     2 * sample.tmap.step_mm)
+        pred = attach_taxels(
+            Prediction(sample.image, segmentation=sample.true_segmentation),
+            sample.tmap,
+            sample.pressure,
+        )
+        reference = slow_backproject(sample.tmap, sample.true_segmentation, 2 * sample.tmap.step_mm)
         assert np.array_equal(pred.taxel_labels, reference)
         active = sample.pressure > 0
         assert np.array_equal(active, sample.true_labels > 0)  # hand samples: pressed = labelled
@@ -158,9 +160,21 @@ def test_predict_command_end_to_end_and_view_hand_off(checkpoints, tiny_dataset,
     app = typer.Typer()
     register(app)
     png, labels = tmp_path / "fig" / "pred.png", tmp_path / "pred33.npy"
-    args = ["predict", "--data", str(tiny_dataset), "--index", "3", "--classifier",
-            str(checkpoints["handsnet"]), "--segmenter", str(checkpoints["segnet"]), "--png",
-            str(png), "--save-labels", str(labels)]
+    args = [
+        "predict",
+        "--data",
+        str(tiny_dataset),
+        "--index",
+        "3",
+        "--classifier",
+        str(checkpoints["handsnet"]),
+        "--segmenter",
+        str(checkpoints["segnet"]),
+        "--png",
+        str(png),
+        "--save-labels",
+        str(labels),
+    ]
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
     sample = read_sample(tiny_dataset, 3)
@@ -186,13 +200,28 @@ def test_predict_command_end_to_end_and_view_hand_off(checkpoints, tiny_dataset,
     [
         (["--data", "{data}", "--segmenter", "{seg}"], "--data and --index go together"),
         (["--data", "{data}", "--index", "99", "--segmenter", "{seg}"], "out of range"),
-        (["--image", "{seg}", "--segmenter", "{seg}", "--save-labels", "{out}/l.npy"],
-         "an image alone has no taxels"),
-        (["--data", "{data}", "--index", "0", "--classifier", "{seg}", "--save-labels",
-          "{out}/l.npy"], "--save-labels needs --segmenter"),
+        (
+            ["--image", "{seg}", "--segmenter", "{seg}", "--save-labels", "{out}/l.npy"],
+            "an image alone has no taxels",
+        ),
+        (
+            [
+                "--data",
+                "{data}",
+                "--index",
+                "0",
+                "--classifier",
+                "{seg}",
+                "--save-labels",
+                "{out}/l.npy",
+            ],
+            "--save-labels needs --segmenter",
+        ),
         (["--data", "{data}", "--index", "0", "--segmenter", "{out}/none.pt"], "no checkpoint"),
-        (["--frame", "{seg}", "--data", "{data}", "--index", "0", "--segmenter", "{seg}"],
-         "give one input"),
+        (
+            ["--frame", "{seg}", "--data", "{data}", "--index", "0", "--segmenter", "{seg}"],
+            "give one input",
+        ),
     ],
 )
 def test_predict_command_errors_before_work(checkpoints, tiny_dataset, tmp_path, args, message):
@@ -217,15 +246,30 @@ def test_parts_count_taxels_above_the_datasets_active_threshold(tiny_dataset, tm
     """A synthetic dataset records its active-taxel threshold (config ``episode.active_pa``);
     the per-part summary of a dataset sample counts only the taxels above it."""
     src = open_dataset(tiny_dataset)
-    fields = ("raw", "pressure_pa", "image", "taxel_label", "label_image", "is_hand",
-              "subject_id", "instance_id")
+    fields = (
+        "raw",
+        "pressure_pa",
+        "image",
+        "taxel_label",
+        "label_image",
+        "is_hand",
+        "subject_id",
+        "instance_id",
+    )
     samples = [{f: src[f][i] for f in fields} for i in (0, 30)]
     pressure = src.pressure_from_raw(samples[0]["raw"])
     threshold = float(np.median(pressure[pressure > 0]))
     gain = {"skin_counts_per_pa": src.attrs["skin_counts_per_pa"]}
-    writer = DatasetWriter(tmp_path / "ds", config={"episode": {"active_pa": threshold}},
-                           part="sector", generator_version="t", seed=0, tmap=src.map,
-                           layout=src.layout, attrs=gain)  # fmt: skip
+    writer = DatasetWriter(
+        tmp_path / "ds",
+        config={"episode": {"active_pa": threshold}},
+        part="sector",
+        generator_version="t",
+        seed=0,
+        tmap=src.map,
+        layout=src.layout,
+        attrs=gain,
+    )
     writer.write_chunk(0, samples)
     writer.merge()
     sample = read_sample(tmp_path / "ds", 0)

@@ -20,8 +20,9 @@ from learn.models import create_model
 from learn.quantize import MIN_CALIBRATION, calibration_images, int8_supported, quantize_int8
 from tactile.errors import ConfigError
 
-pytestmark = pytest.mark.skipif(not int8_supported(), reason="PyTorch without the oneDNN "
-                                "quantized engine")  # fmt: skip
+pytestmark = pytest.mark.skipif(
+    not int8_supported(), reason="PyTorch without the oneDNN quantized engine"
+)
 
 
 def _images(n: int, seed: int, size=(32, 48)) -> torch.Tensor:
@@ -46,8 +47,10 @@ def test_int8_follows_the_float_network(checkpoints, tiny_dataset):
     steps accumulated over 7 layers) and its decisions agree on all but borderline images."""
     model, run = _trained(checkpoints)
     calib = calibration_images(tiny_dataset, run, None)
-    test = materialize(open_split(tiny_dataset, "test", run.task, run.model.input_size, None,
-                                  run.train.seed), progress=False)  # fmt: skip
+    test = materialize(
+        open_split(tiny_dataset, "test", run.task, run.model.input_size, None, run.train.seed),
+        progress=False,
+    )
     q = quantize_int8(model, calib)
     with torch.no_grad():
         ref, got = model(test.x), q(test.x)
@@ -64,8 +67,10 @@ def test_calibration_sets_the_activation_ranges(checkpoints, tiny_dataset):
     activations and misses by far more than when calibrated on the training images."""
     model, run = _trained(checkpoints)
     calib = calibration_images(tiny_dataset, run, None)
-    x = materialize(open_split(tiny_dataset, "test", run.task, run.model.input_size, None,
-                               run.train.seed), progress=False).x  # fmt: skip
+    x = materialize(
+        open_split(tiny_dataset, "test", run.task, run.model.input_size, None, run.train.seed),
+        progress=False,
+    ).x
     with torch.no_grad():
         ref = model(x)
         good = _relative_error(ref, quantize_int8(model, calib)(x))
@@ -88,8 +93,12 @@ def test_model_and_engine_untouched():
 
 @pytest.mark.parametrize(
     ("case", "message"),
-    [("segnet", "covers HandsNet"), ("vgg16", "covers HandsNet"),
-     ("few", f"at least {MIN_CALIBRATION} images"), ("nan", "NaN")],
+    [
+        ("segnet", "covers HandsNet"),
+        ("vgg16", "covers HandsNet"),
+        ("few", f"at least {MIN_CALIBRATION} images"),
+        ("nan", "NaN"),
+    ],
 )
 def test_bad_input_refused(case, message):
     kw = {"width": 0.125} if case in ("segnet", "vgg16") else {"input_size": (32, 48)}
@@ -109,12 +118,32 @@ def test_evaluate_int8_row(checkpoints, tiny_dataset, tmp_path):
     register(app)
     runner = CliRunner()
     md = tmp_path / "r.md"
-    res = runner.invoke(app, ["evaluate", str(checkpoints["segnet"]), "--data", str(tiny_dataset),
-                              "--report", str(md), "--int8"])  # fmt: skip
+    res = runner.invoke(
+        app,
+        [
+            "evaluate",
+            str(checkpoints["segnet"]),
+            "--data",
+            str(tiny_dataset),
+            "--report",
+            str(md),
+            "--int8",
+        ],
+    )
     assert res.exit_code == 2 and "no float HandsNet checkpoint" in res.output, res.output
     assert not md.exists()
-    res = runner.invoke(app, ["evaluate", str(checkpoints["handsnet"]), "--data",
-                              str(tiny_dataset), "--report", str(md), "--int8"])  # fmt: skip
+    res = runner.invoke(
+        app,
+        [
+            "evaluate",
+            str(checkpoints["handsnet"]),
+            "--data",
+            str(tiny_dataset),
+            "--report",
+            str(md),
+            "--int8",
+        ],
+    )
     assert res.exit_code == 0, res.output
     rows = json.loads(md.with_suffix(".json").read_text())
     plain, q = rows
@@ -179,6 +208,10 @@ def _input_of(predictor, image) -> torch.Tensor:
 
     from learn.inputs import net_input
 
-    arr = net_input(np.asarray(image, np.float32) / 255.0, predictor.input_size, predictor.task,
-                    predictor.canvas(1.0))  # fmt: skip
+    arr = net_input(
+        np.asarray(image, np.float32) / 255.0,
+        predictor.input_size,
+        predictor.task,
+        predictor.canvas(1.0),
+    )
     return torch.from_numpy(arr)[None, None]

@@ -74,8 +74,9 @@ def test_training_reads_the_new_split(script, tiny_dataset, tmp_path):
 def test_the_common_copy_tests_on_both_test_splits(script, tiny_dataset, tmp_path):
     script.resplit_by_sample(tiny_dataset, tmp_path / "bysample", seed=1)
     n = script.common_copy(tiny_dataset, tmp_path / "bysample", tmp_path / "common")
-    want = sorted(set(_splits(tiny_dataset)[1].tolist()) & set(_splits(tmp_path / "bysample")[1]
-                                                              .tolist()))  # fmt: skip
+    want = sorted(
+        set(_splits(tiny_dataset)[1].tolist()) & set(_splits(tmp_path / "bysample")[1].tolist())
+    )
     train, test = _splits(tmp_path / "common")
     assert test.tolist() == want and n == len(want) > 0
     assert sorted([*train.tolist(), *test.tolist()]) == list(range(len(train) + len(test)))

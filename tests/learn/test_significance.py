@@ -73,8 +73,11 @@ def test_mcnemar_matches_the_exact_binomial_sum(b, c):
 
 def _row(wrong: range, n: int = 100) -> dict:
     """A two-class classifier row that gets the samples ``wrong`` wrong (all true class 0)."""
-    return {"task": "classify", "cm": [[n - len(wrong), len(wrong)], [0, 0]],
-            "errors": [{"index": int(i)} for i in wrong]}  # fmt: skip
+    return {
+        "task": "classify",
+        "cm": [[n - len(wrong), len(wrong)], [0, 0]],
+        "errors": [{"index": int(i)} for i in wrong],
+    }
 
 
 def test_paired_counts_and_markdown():
@@ -82,7 +85,8 @@ def test_paired_counts_and_markdown():
     c = paired(a, b)
     assert (c["only_a_right"], c["only_b_right"]) == (15, 5)
     assert c["difference"] == pytest.approx(0.10) and c["p"] == pytest.approx(
-        _reference_mcnemar(15, 5))
+        _reference_mcnemar(15, 5)
+    )
     text = "\n".join(significance_markdown([a, b], ["A", "B"]))
     lo, hi = _reference_interval(90, 100)
     assert f"| A | 100 | 90.00 | {100 * lo:.2f}–{100 * hi:.2f} |" in text
@@ -136,8 +140,7 @@ def test_mean_iou_interval_against_a_slow_bootstrap():
     cms[:, 2, 2], cms[:, 2, 1] = 80 * hit[::-1], 80 * (1 - hit[::-1])
     lo, hi = mean_iou_interval(cms, resamples=2000)
     slow_rng = np.random.default_rng(99)
-    boot = [M.mean_iou(torch.tensor(cms[slow_rng.integers(0, s, s)].sum(0)))
-            for _ in range(2000)]
+    boot = [M.mean_iou(torch.tensor(cms[slow_rng.integers(0, s, s)].sum(0))) for _ in range(2000)]
     ref_lo, ref_hi = np.quantile(boot, [0.025, 0.975])
     assert lo == pytest.approx(ref_lo, abs=0.005) and hi == pytest.approx(ref_hi, abs=0.005)
     assert lo < M.mean_iou(torch.tensor(cms.sum(0))) < hi and hi - lo > 0.01

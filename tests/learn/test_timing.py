@@ -40,8 +40,9 @@ def test_paths_take_turns_and_the_least_round_median_is_kept():
     warm, runs = 2, 5
     slow_then_fast = Sleeper("a", [0.012, 0.002, 0.006], warm + runs, log)  # ms: 12, 2, 6
     steady = Sleeper("b", [0.004], warm + runs, log)
-    a_ms, none, b_ms = interleaved_cpu_ms([slow_then_fast, None, steady], SIZE, threads=1,
-                                          n_runs=runs, rounds=3, n_warmup=warm)  # fmt: skip
+    a_ms, none, b_ms = interleaved_cpu_ms(
+        [slow_then_fast, None, steady], SIZE, threads=1, n_runs=runs, rounds=3, n_warmup=warm
+    )
     assert none is None
     # Runs of one path come in blocks of warm + runs calls, alternating a, b, a, b, a, b.
     blocks = [log[i] for i in range(0, len(log), warm + runs)]
@@ -96,8 +97,7 @@ def test_classical_models_keep_the_least_round_median():
 
     warm, runs = 2, 5
     model = SleepyPredictor([0.009, 0.003, 0.006], warm + runs)  # ms: 9, 3, 6
-    ms = ms_per_image(model, np.zeros((4, 3, 3)), threads=1, n_runs=runs, rounds=3,
-                      n_warmup=warm)  # fmt: skip
+    ms = ms_per_image(model, np.zeros((4, 3, 3)), threads=1, n_runs=runs, rounds=3, n_warmup=warm)
     assert model.calls == 3 * (warm + runs)
     assert 3.0 <= ms < 4.5  # round 2's median, not the median over all rounds (6 ms)
     with pytest.raises(ConfigError, match="time rounds must be"):

@@ -70,13 +70,15 @@ def test_validation_inside_a_keyed_split_is_keyed(tiny_writer, keyed_reference, 
         assert ds.attrs["split_method"] == "keyed"
         subject, instance = ds["subject_id"][()], ds["instance_id"][()]
         assert sides_of(subject, instance, ds.splits["train"]) == reference(
-            set(sides_of(subject, instance, ds.splits["train"])), seed=3)
+            set(sides_of(subject, instance, ds.splits["train"])), seed=3
+        )
     ds = TorchTactileDataset(folder, split="train", flips=False)
     for seed in (0, 7):
         train, val = validation_split(ds, 0.3, seed=seed)
         keep = np.sort(ds.indices)
-        sides = sides_of(subject[keep], instance[keep],
-                         np.flatnonzero(np.isin(keep, train.indices)))  # fmt: skip
+        sides = sides_of(
+            subject[keep], instance[keep], np.flatnonzero(np.isin(keep, train.indices))
+        )
         assert sides == reference(set(sides), seed, fraction=0.7, stream=1)
         assert set(np.r_[train.indices, val.indices]) == set(keep)
 
@@ -115,8 +117,9 @@ def test_resume_a_checkpoint_older_than_a_config_key(tiny_dataset, tiny_run, tmp
         fit(replace_train(run, lr=0.5), data, tmp_path / "cut", resume=True, progress=False)
 
 
-def test_checkpoint_records_its_start_through_a_resume(tiny_dataset, tiny_run, checkpoints,
-                                                       tmp_path):  # fmt: skip
+def test_checkpoint_records_its_start_through_a_resume(
+    tiny_dataset, tiny_run, checkpoints, tmp_path
+):
     run = tiny_run("handsnet", epochs=2)
     data = load_data(tiny_dataset, run)
     start = checkpoints["handsnet"]
@@ -138,8 +141,14 @@ def test_finetuning_applies_lr_factors(tiny_dataset, tiny_run, checkpoints):
         if epoch == 0:
             first["w"] = opt.param_groups[0]["params"][0].detach().clone()
 
-    fit(run, load_data(tiny_dataset, run), None, init_from=checkpoints["handsnet"],
-        progress=False, on_epoch=on_epoch)  # fmt: skip
+    fit(
+        run,
+        load_data(tiny_dataset, run),
+        None,
+        init_from=checkpoints["handsnet"],
+        progress=False,
+        on_epoch=on_epoch,
+    )
     want = {0: {0.1: 0.001, 1.0: 0.01}, 59: {0.1: 0.001, 1.0: 0.01}, 60: {0.1: 5e-4, 1.0: 5e-3}}
     for epoch, lrs in want.items():
         assert {f: pytest.approx(lr) for f, lr in seen[epoch]} == lrs
@@ -147,9 +156,15 @@ def test_finetuning_applies_lr_factors(tiny_dataset, tiny_run, checkpoints):
     assert torch.equal(first["w"], conv0)  # epoch 0 starts from the checkpoint's weights
 
 
-@pytest.mark.parametrize(("flips", "rot180", "expected"), [
-    (True, False, [0, 1, 2]), (False, False, [0]), (True, True, [0, 1, 2, 3]),
-    (False, True, [0, 3])])  # fmt: skip
+@pytest.mark.parametrize(
+    ("flips", "rot180", "expected"),
+    [
+        (True, False, [0, 1, 2]),
+        (False, False, [0]),
+        (True, True, [0, 1, 2, 3]),
+        (False, True, [0, 3]),
+    ],
+)
 def test_training_views_against_numpy(flips, rot180, expected):
     """Item j of an epoch is sample j // V in view views[j % V]: as is, columns reversed, rows
     reversed, or turned by 180 degrees (numpy's rot90 twice), for images and label images."""
@@ -161,8 +176,12 @@ def test_training_views_against_numpy(flips, rot180, expected):
     assert views.tolist() == expected
     items = torch.arange(5 * len(views))
     xb, yb = get_batch(data, items, views)
-    ref = {0: lambda a: a, 1: lambda a: a[..., ::-1], 2: lambda a: a[..., ::-1, :],
-           3: lambda a: np.rot90(a, 2, axes=(-2, -1))}  # fmt: skip
+    ref = {
+        0: lambda a: a,
+        1: lambda a: a[..., ::-1],
+        2: lambda a: a[..., ::-1, :],
+        3: lambda a: np.rot90(a, 2, axes=(-2, -1)),
+    }
     for j in range(len(items)):
         s, v = divmod(j, len(views))
         np.testing.assert_array_equal(xb[j].numpy(), ref[expected[v]](x[s]))
@@ -171,8 +190,10 @@ def test_training_views_against_numpy(flips, rot180, expected):
 
 def test_run_config_toml(tmp_path):
     path = tmp_path / "run.toml"
-    path.write_text('val_fraction = 0.2\n[model]\narch = "handsnet"\ninput_size = [32, 48]\n'
-                    '[train]\nlr = 0.05\nlr_factors = { first_two_convs = 0.1 }\n')  # fmt: skip
+    path.write_text(
+        'val_fraction = 0.2\n[model]\narch = "handsnet"\ninput_size = [32, 48]\n'
+        "[train]\nlr = 0.05\nlr_factors = { first_two_convs = 0.1 }\n"
+    )
     run = load_run_config(path)
     assert run.val_fraction == 0.2 and run.model.input_size == (32, 48)
     assert run.train.lr == 0.05 and dict(run.train.lr_factors) == {"first_two_convs": 0.1}
@@ -187,8 +208,10 @@ def test_run_config_toml(tmp_path):
 
 
 def test_crossval_folds_are_group_disjoint(tiny_dataset, tiny_run):
-    assert parse_grid("train.lr=0.01,0.001; threads=1") == {"train.lr": [0.01, 0.001],
-                                                            "threads": [1]}  # fmt: skip
+    assert parse_grid("train.lr=0.01,0.001; threads=1") == {
+        "train.lr": [0.01, 0.001],
+        "threads": [1],
+    }
     ds = TorchTactileDataset(tiny_dataset, split="train", flips=False)
     _, subject, instance = group_ids(ds)
     for train, val in folds(ds, 3, seed=0):
@@ -201,8 +224,9 @@ def test_crossval_folds_are_group_disjoint(tiny_dataset, tiny_run):
         parse_grid("train.lr")
 
 
-def test_label_smoothing_trains_on_smoothed_targets_but_validates_on_plain_ce(tiny_dataset,
-                                                                             tiny_run):  # fmt: skip
+def test_label_smoothing_trains_on_smoothed_targets_but_validates_on_plain_ce(
+    tiny_dataset, tiny_run
+):
     from learn.losses import SegmentationLoss
 
     torch.set_num_threads(1)
@@ -212,15 +236,17 @@ def test_label_smoothing_trains_on_smoothed_targets_but_validates_on_plain_ce(ti
     res = fit(run, data, None, progress=False)
     plain = evaluate_tensors(res.model, data.val, 2, run.eval_batch_size, SegmentationLoss("ce"))
     assert res.history[0]["val_loss"] == pytest.approx(plain.loss, rel=1e-6)
-    smoothed = evaluate_tensors(res.model, data.val, 2, run.eval_batch_size,
-                                SegmentationLoss("ce", None, 0.2))  # fmt: skip
+    smoothed = evaluate_tensors(
+        res.model, data.val, 2, run.eval_batch_size, SegmentationLoss("ce", None, 0.2)
+    )
     assert smoothed.loss != pytest.approx(plain.loss, rel=1e-3)
     unsmoothed = fit(replace_train(run, label_smoothing=0.0), data, None, progress=False)
     assert unsmoothed.history[0]["train_loss"] != res.history[0]["train_loss"]
 
 
-@pytest.mark.parametrize(("optimizer", "expected"),
-                         [("adamw", 0.95), ("adam", 0.9), ("sgdm", 0.95)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("optimizer", "expected"), [("adamw", 0.95), ("adam", 0.9), ("sgdm", 0.95)]
+)
 def test_weight_decay_alone_moves_a_weight_as_each_optimizer_defines(optimizer, expected):
     """With a zero loss gradient, one step from w = 1 (lr 0.1, weight_decay 0.5): AdamW decays
     by lr * wd (w = 0.95, Loshchilov & Hutter); Adam's L2 term is normalised by its own

@@ -25,8 +25,12 @@ SIZE = (32, 40)
 def slow_reference(model: nn.Module, x: torch.Tensor, views: list[int]) -> torch.Tensor:
     """log of the mean softmax, one image and one view at a time, flips written out with numpy
     index reversal (a view's output of a segmenter is reversed back the same way)."""
-    rev = {0: (slice(None), slice(None)), 1: (slice(None), slice(None, None, -1)),
-           2: (slice(None, None, -1), slice(None)), 3: (slice(None, None, -1),) * 2}  # fmt: skip
+    rev = {
+        0: (slice(None), slice(None)),
+        1: (slice(None), slice(None, None, -1)),
+        2: (slice(None, None, -1), slice(None)),
+        3: (slice(None, None, -1),) * 2,
+    }
     out = []
     with torch.no_grad():
         for img in x.numpy():  # (1, h, w)
@@ -39,8 +43,10 @@ def slow_reference(model: nn.Module, x: torch.Tensor, views: list[int]) -> torch
     return torch.from_numpy(np.stack(out))
 
 
-@pytest.mark.parametrize(("arch", "views"), [("handsnet", [0, 1, 2]), ("segnet", [0, 1, 2]),
-                                             ("fcn16s", [0, 1, 2, 3]), ("segnet", [0, 3])])
+@pytest.mark.parametrize(
+    ("arch", "views"),
+    [("handsnet", [0, 1, 2]), ("segnet", [0, 1, 2]), ("fcn16s", [0, 1, 2, 3]), ("segnet", [0, 3])],
+)
 def test_matches_the_slow_reference(arch, views):
     torch.manual_seed(0)
     kw = {"input_size": SIZE} if arch == "handsnet" else {"width": 0.0625}
@@ -58,8 +64,9 @@ def test_flip_symmetric_networks_are_unchanged():
     torch.manual_seed(1)
     x = torch.rand(4, 1, *SIZE)
     pixelwise = nn.Conv2d(1, 7, 1)
-    pooled = nn.Sequential(nn.Conv2d(1, 5, 1), nn.AdaptiveAvgPool2d(1), nn.Flatten(),
-                           nn.Linear(5, 2))  # fmt: skip
+    pooled = nn.Sequential(
+        nn.Conv2d(1, 5, 1), nn.AdaptiveAvgPool2d(1), nn.Flatten(), nn.Linear(5, 2)
+    )
     with torch.no_grad():
         for net in (pixelwise, pooled):
             got = FlipTTA(net, (0, 1, 2, 3))(x)
@@ -73,7 +80,7 @@ def test_numpy_and_torch_flips_agree_with_index_reversal(view):
     rev_rows, rev_cols = view in (2, 3), view in (1, 3)
     for shape in ((5, 7), (2, 5, 7)):
         a = np.arange(np.prod(shape)).reshape(shape)
-        want = a[..., ::-1 if rev_rows else 1, :][..., ::-1 if rev_cols else 1]
+        want = a[..., :: -1 if rev_rows else 1, :][..., :: -1 if rev_cols else 1]
         np.testing.assert_array_equal(flip_array(a, view), want)
         np.testing.assert_array_equal(flip_view(torch.from_numpy(a), view).numpy(), want)
 
@@ -104,28 +111,54 @@ def test_evaluate_with_test_time_flips(checkpoints, tiny_dataset, tmp_path):
     row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3, tta=True)
     assert row["tta_views"] == [0, 1, 2] and row["ms_per_image"]["fast"] > 0
     model, run = model_from_checkpoint(load_checkpoint(checkpoints["handsnet"]))
-    test = materialize(open_split(tiny_dataset, "test", "classify", run.model.input_size, None,
-                                  run.train.seed), "test", False)  # fmt: skip
+    test = materialize(
+        open_split(tiny_dataset, "test", "classify", run.model.input_size, None, run.train.seed),
+        "test",
+        False,
+    )
     pred = slow_reference(model, test.x, [0, 1, 2]).argmax(1)
     assert row["cm"] == confusion_matrix(test.y, pred, 2).tolist()
 
     app = typer.Typer()
     register(app)
     md = tmp_path / "r.md"
-    args = ["evaluate", str(checkpoints["handsnet"]), str(checkpoints["segnet"]), "--data",
-            str(tiny_dataset), "--report", str(md), "--tta"]  # fmt: skip
+    args = [
+        "evaluate",
+        str(checkpoints["handsnet"]),
+        str(checkpoints["segnet"]),
+        "--data",
+        str(tiny_dataset),
+        "--report",
+        str(md),
+        "--tta",
+    ]
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
     rows = json.loads(md.with_suffix(".json").read_text())
     assert [(r["arch"], r["tta_views"]) for r in rows] == [
-        ("handsnet", None), ("handsnet", [0, 1, 2]), ("segnet", None), ("segnet", [0, 1, 2])]
+        ("handsnet", None),
+        ("handsnet", [0, 1, 2]),
+        ("segnet", None),
+        ("segnet", [0, 1, 2]),
+    ]
     text = md.read_text()
     assert "| HandsNet + test-time flips |" in text and "| SegNet + test-time flips |" in text
     assert "run as one batch of 3 images" in text
     bad = without_flips(checkpoints["segnet"], tmp_path)
     md2 = tmp_path / "r2.md"
-    res = CliRunner().invoke(app, ["evaluate", str(checkpoints["handsnet"]), str(bad), "--data",
-                                   str(tiny_dataset), "--report", str(md2), "--tta"])  # fmt: skip
+    res = CliRunner().invoke(
+        app,
+        [
+            "evaluate",
+            str(checkpoints["handsnet"]),
+            str(bad),
+            "--data",
+            str(tiny_dataset),
+            "--report",
+            str(md2),
+            "--tta",
+        ],
+    )
     assert res.exit_code == 2 and "trained without flips" in res.output, res.output
     assert not md2.exists()
 

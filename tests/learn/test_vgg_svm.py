@@ -36,19 +36,22 @@ def vgg16_checkpoint(tiny_dataset, tiny_run, tmp_path_factory):
     return folder / "best.pt"
 
 
-def test_vgg_svm_train_save_load_evaluate(vgg16_checkpoint, checkpoints, tiny_dataset, tiny_writer,
-                                          tmp_path):  # fmt: skip
+def test_vgg_svm_train_save_load_evaluate(
+    vgg16_checkpoint, checkpoints, tiny_dataset, tiny_writer, tmp_path
+):
     out = tmp_path / "vgg_svm"
-    report = train_classical("vgg_svm", tiny_dataset, out, seed=1, init=vgg16_checkpoint,
-                             progress=False)  # fmt: skip
+    report = train_classical(
+        "vgg_svm", tiny_dataset, out, seed=1, init=vgg16_checkpoint, progress=False
+    )
     loaded = load_classical(out / MODEL_FILE)
     assert loaded.input_size == (32, 48) and loaded.seed == 1
     fresh = VggSvmClassifier.from_checkpoint(vgg16_checkpoint, VggSvmConfig(), seed=1)
     fresh.fit(*split_images(tiny_dataset, "train", (32, 48))[:2])
     x, y, _ = split_images(tiny_dataset, "test", (32, 48))
     np.testing.assert_array_equal(loaded.predict(x), fresh.predict(x))
-    np.testing.assert_allclose(loaded.decision_function(x), fresh.decision_function(x),
-                               rtol=1e-6, atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        loaded.decision_function(x), fresh.decision_function(x), rtol=1e-6, atol=1e-6
+    )
     np.testing.assert_allclose(loaded.features(x), fresh.features(x))  # the weights came back
     row = evaluate_classical(out / MODEL_FILE, tiny_dataset, time_runs=3)
     assert row["test_data"] == str(tiny_dataset)
@@ -70,8 +73,9 @@ def test_vgg_svm_train_save_load_evaluate(vgg16_checkpoint, checkpoints, tiny_da
     wrong = sorted(np.flatnonzero(pred != y), key=lambda k: -abs(score[k]))
     assert len(wrong) > 1, "the hands recorded as objects should leave the SVM errors to rank"
     assert [e["index"] for e in row["errors"]] == [int(indices[k]) for k in wrong]
-    np.testing.assert_allclose([e["margin"] for e in row["errors"]],
-                               [abs(score[k]) for k in wrong], rtol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        [e["margin"] for e in row["errors"]], [abs(score[k]) for k in wrong], rtol=1e-6
+    )
     assert sum(b["n"] for b in row["by_contactor"]) == len(y)
     assert sum(b["n"] for b in row["by_active_taxels"]) == len(y)
     (sheet,) = save_error_sheets([row], mislabelled, tmp_path / "svm.md")

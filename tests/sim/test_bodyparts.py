@@ -77,17 +77,22 @@ def test_instances_are_deterministic(kind: str) -> None:
 
 # Anthropometric ranges (ANSUR II, Gordon et al. 2014; see sim/bodyparts.py), metres.
 RANGES = {
-    "forearm": [("half_width", 0.038, 0.050), ("wrist_radius", 0.022, 0.030),
-                ("length", 0.24, 0.29)],
+    "forearm": [
+        ("half_width", 0.038, 0.050),
+        ("wrist_radius", 0.022, 0.030),
+        ("length", 0.24, 0.29),
+    ],
     "upper_arm": [("radius", 0.040, 0.058), ("length", 0.28, 0.36)],
-    "elbow": [("olecranon_half_width", 0.022, 0.028), ("flexion", np.deg2rad(60),
-                                                       np.deg2rad(120))],
+    "elbow": [("olecranon_half_width", 0.022, 0.028), ("flexion", np.deg2rad(60), np.deg2rad(120))],
     "shoulder": [("deltoid_x", 0.055, 0.07), ("arm_radius", 0.040, 0.055)],
     "chest": [("half_breadth", 0.135, 0.19), ("half_depth", 0.105, 0.15)],
     "back": [("half_breadth", 0.135, 0.19), ("scapula_proud", 0.01, 0.02)],
     "knee": [("patella_half_width", 0.0225, 0.0275), ("thigh_radius", 0.07, 0.10)],
-    "head": [("half_breadth", 0.07, 0.0825), ("half_length", 0.09, 0.105),
-             ("half_height", 0.105, 0.12)],
+    "head": [
+        ("half_breadth", 0.07, 0.0825),
+        ("half_length", 0.09, 0.105),
+        ("half_height", 0.105, 0.12),
+    ],
 }
 
 

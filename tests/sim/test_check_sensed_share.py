@@ -13,8 +13,16 @@ from sim.gen_config import load_generate_config
 from sim.generate import generate
 from tactile.dataset import open_dataset
 
-SMALL = {"part": "plate", "n": 6, "chunk_size": 3, "n_subjects": 3, "instances_per_kind": 2,
-         "duration_scale": 0.5, "seed": 11, "episode": {"max_attempts": 20}}  # fmt: skip
+SMALL = {
+    "part": "plate",
+    "n": 6,
+    "chunk_size": 3,
+    "n_subjects": 3,
+    "instances_per_kind": 2,
+    "duration_scale": 0.5,
+    "seed": 11,
+    "episode": {"max_attempts": 20},
+}
 
 
 @pytest.fixture(scope="module")

@@ -174,8 +174,12 @@ def test_sphere_pressure_is_force_consistent_and_centre_peaked():
     rows, cols = np.nonzero(twins)  # taxels at the same distance from the centre: same pressure
     np.testing.assert_allclose(best.pressure_pa[rows], best.pressure_pa[cols], rtol=1e-6)
     depth = np.maximum(RADIUS_M - rho, 0.0)
-    np.testing.assert_allclose(best.pressure_pa, local.skin.spread @ (
-        best.sensed_force_n * depth / (depth @ area)), rtol=1e-3, atol=1e-3)
+    np.testing.assert_allclose(
+        best.pressure_pa,
+        local.skin.spread @ (best.sensed_force_n * depth / (depth @ area)),
+        rtol=1e-3,
+        atol=1e-3,
+    )
 
 
 def test_contact_on_bare_link_reads_zero(ctx):

@@ -39,6 +39,7 @@ def test_pitch_density_box_and_hole(name: str) -> None:
     # Same box: the flat pads span the forearm's within 4 % each way.
     forearm = get_part("forearm")
     np.testing.assert_allclose(np.ptp(part.flat_mm, 0), np.ptp(forearm.flat_mm, 0), rtol=0.04)
+
     # Taxels per covered area of the map: (rows / 5)² times the forearm's, within 6 %.
     def density(p) -> float:
         tmap = TactileMap.build(p.layout, step_mm=1.0)

@@ -46,8 +46,10 @@ def test_flat_pose_fans_the_pinkie_twice_as_far_as_the_index_and_holds_the_sprea
 def test_trial_spread_stays_inside_the_joint_limits_and_varies_with_noise():
     noisy = dataclasses.replace(SUBJECT, pose_noise_deg=8.0, finger_spread_deg=9.5)
     rng = np.random.default_rng(2)
-    pinkie = [np.rad2deg(finger_pose("palm", noisy, rng).targets_rad["pinkie_mcp_abd"])
-              for _ in range(200)]
+    pinkie = [
+        np.rad2deg(finger_pose("palm", noisy, rng).targets_rad["pinkie_mcp_abd"])
+        for _ in range(200)
+    ]
     assert max(pinkie) <= 20.0 and min(pinkie) >= 0.0  # the pinkie's abduction limit
     assert np.std(pinkie) > 1.0
 

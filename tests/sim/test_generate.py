@@ -24,8 +24,16 @@ from tactile.errors import ConfigError, DataError
 ROOT = Path(__file__).resolve().parents[2]
 # 12 plate samples in 4 chunks of 3, short presses: about a second of simulation per run. A
 # hand is sometimes too big for the small plate: more attempts than the default keep it robust.
-SMALL = {"part": "plate", "n": 12, "chunk_size": 3, "n_subjects": 3, "instances_per_kind": 2,
-         "duration_scale": 0.5, "seed": 5, "episode": {"max_attempts": 20}}  # fmt: skip
+SMALL = {
+    "part": "plate",
+    "n": 12,
+    "chunk_size": 3,
+    "n_subjects": 3,
+    "instances_per_kind": 2,
+    "duration_scale": 0.5,
+    "seed": 5,
+    "episode": {"max_attempts": 20},
+}
 
 
 def small(**kw: object) -> GenerateConfig:
@@ -66,8 +74,9 @@ def test_images_regenerated_from_raw_readings_equal_the_stored_ones(reference: P
 
     # learn's fault path images from raw readings too: with no fault it must see the same images
     plain = TorchTactileDataset(reference, split=None, task="classify", flips=False)
-    faulty = TorchTactileDataset(reference, split=None, task="classify", flips=False,
-                                 faults=FaultSpec())  # fmt: skip
+    faulty = TorchTactileDataset(
+        reference, split=None, task="classify", flips=False, faults=FaultSpec()
+    )
     for i in range(len(plain)):
         np.testing.assert_array_equal(faulty[i][0].numpy(), plain[i][0].numpy())
 
@@ -118,9 +127,20 @@ def test_sigkill_mid_run_then_resume_equals_uninterrupted(reference: Path, tmp_p
     out = tmp_path / "killed"
     cfg_file = tmp_path / "small.toml"
     cfg_file.write_text(to_toml(small()))  # the CLI options below repeat some of its values
-    argv = [sys.executable, "-c", "from handskin.cli import main; main()", "generate",
-            "--out", str(out), "--workers", "1", "--quiet", "--config", str(cfg_file),
-            *[f"--{k.replace('_', '-')}={v}" for k, v in SMALL.items() if k in CLI]]
+    argv = [
+        sys.executable,
+        "-c",
+        "from handskin.cli import main; main()",
+        "generate",
+        "--out",
+        str(out),
+        "--workers",
+        "1",
+        "--quiet",
+        "--config",
+        str(cfg_file),
+        *[f"--{k.replace('_', '-')}={v}" for k, v in SMALL.items() if k in CLI],
+    ]
     log = tmp_path / "stderr.txt"
     with log.open("w") as err:
         proc = subprocess.Popen(argv, cwd=ROOT, env=_env(), stderr=err)
@@ -135,8 +155,10 @@ def test_sigkill_mid_run_then_resume_equals_uninterrupted(reference: Path, tmp_p
     with open_dataset(reference) as ds:  # the closing line says how the dataset was split
         train, test = ds.splits["train"], ds.splits["test"]
         held = len(set(ds["subject_id"][()][test].tolist()) - {-1})
-    assert (f"split (greedy): {len(train)} train / {len(test)} test samples "
-            f"({100 * len(train) / 12:.1f} % train); held out: {held} subjects") in done.stdout
+    assert (
+        f"split (greedy): {len(train)} train / {len(test)} test samples "
+        f"({100 * len(train) / 12:.1f} % train); held out: {held} subjects"
+    ) in done.stdout
 
 
 CLI = ("part", "n", "seed", "chunk_size")
@@ -257,8 +279,9 @@ def test_min_active_taxels_replaces_only_the_small_prints(reference: Path, tmp_p
     m = int(np.median(active))  # about half the prints are below it
     assert 1 < m and (active < m).any()
     out = tmp_path / "ds"
-    generate(small(episode={"max_attempts": 40, "min_active_taxels": m}), out, workers=1,
-             progress=False)  # fmt: skip
+    generate(
+        small(episode={"max_attempts": 40, "min_active_taxels": m}), out, workers=1, progress=False
+    )
     ds = open_dataset(out)
     assert ((ds.pressure_pa[:] > threshold).sum(axis=1) >= m).all()
     raw_ref, raw = ref.raw[:], ds.raw[:]
@@ -287,8 +310,10 @@ def test_a_size_floor_above_the_part_s_taxel_count_is_refused_before_any_work(tm
 
     n_taxels = len(get_part("plate").layout.positions_m)
     out = tmp_path / "ds"
-    with pytest.raises(ConfigError, match=rf"min_active_taxels = {n_taxels + 1} is more than "
-                                          rf"the {n_taxels} taxels of part 'plate'"):
-        generate(small(episode={"min_active_taxels": n_taxels + 1}), out, workers=1,
-                 progress=False)  # fmt: skip
+    with pytest.raises(
+        ConfigError,
+        match=rf"min_active_taxels = {n_taxels + 1} is more than "
+        rf"the {n_taxels} taxels of part 'plate'",
+    ):
+        generate(small(episode={"min_active_taxels": n_taxels + 1}), out, workers=1, progress=False)
     assert not out.exists()

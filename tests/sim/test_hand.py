@@ -46,12 +46,20 @@ def add_tactile_plate(spec: mujoco.MjSpec) -> None:
     mesh = spec.add_mesh(name="plate", scale=[PLATE_HALF_M, PLATE_HALF_M, 0.001])
     mesh.make_plate([PLATE_RES, PLATE_RES])
     spec.worldbody.add_geom(
-        name="plate", type=mujoco.mjtGeom.mjGEOM_MESH, meshname="plate", contype=0,
-        conaffinity=0, pos=[0, 0, 0.001],  # the builtin plate sits 1 mm (scale z) below its frame
+        name="plate",
+        type=mujoco.mjtGeom.mjGEOM_MESH,
+        meshname="plate",
+        contype=0,
+        conaffinity=0,
+        pos=[0, 0, 0.001],  # the builtin plate sits 1 mm (scale z) below its frame
     )
     spec.add_sensor(
-        name="tactile", type=mujoco.mjtSensor.mjSENS_TACTILE, objtype=mujoco.mjtObj.mjOBJ_MESH,
-        objname="plate", reftype=mujoco.mjtObj.mjOBJ_GEOM, refname="plate",
+        name="tactile",
+        type=mujoco.mjtSensor.mjSENS_TACTILE,
+        objtype=mujoco.mjtObj.mjOBJ_MESH,
+        objname="plate",
+        reftype=mujoco.mjtObj.mjOBJ_GEOM,
+        refname="plate",
     )
 
 
@@ -198,8 +206,10 @@ def test_thumb_opposes_index_and_middle(side):
     assert np.linalg.norm(tip("thumb") - tip("index")) > 0.06
     apply_pose(model, data, "pinch", pre(cfg))
     inside = (data.qpos[model.jnt_qposadr] >= model.jnt_range[:, 0] - 1e-9) | ~model.jnt_limited
-    assert np.all(inside & ((data.qpos[model.jnt_qposadr] <= model.jnt_range[:, 1] + 1e-9)
-                            | ~model.jnt_limited))
+    assert np.all(
+        inside
+        & ((data.qpos[model.jnt_qposadr] <= model.jnt_range[:, 1] + 1e-9) | ~model.jnt_limited)
+    )
     gap = min(np.linalg.norm(tip("thumb") - tip(f)) for f in ("index", "middle"))
     assert gap < 0.02
     palm_z = data.site(f"{pre(cfg)}palm_center").xpos[2]
@@ -226,9 +236,16 @@ def test_palm_arches():
 # --- dynamics ----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize(("side", "length_m", "detail"),
-                         [("right", 0.15, "full"), ("right", 0.22, "full"), ("left", 0.15, "full"),
-                          ("left", 0.22, "full"), ("right", 0.18, "coarse")])  # fmt: skip
+@pytest.mark.parametrize(
+    ("side", "length_m", "detail"),
+    [
+        ("right", 0.15, "full"),
+        ("right", 0.22, "full"),
+        ("left", 0.15, "full"),
+        ("left", 0.22, "full"),
+        ("right", 0.18, "coarse"),
+    ],
+)
 def test_steps_one_second_under_random_controls_without_warnings(side, length_m, detail):
     cfg = HandConfig(length_m=length_m, side=side, detail=detail)
     model, data = scene(cfg, floor=True, z_m=0.06)
@@ -252,7 +269,9 @@ def test_fingers_close_around_a_cylinder_and_stop_on_it(side):
     spec = mujoco.MjSpec()
     set_hand_options(spec)
     spec.worldbody.add_geom(
-        name="cylinder", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[radius_m, 0.15, 0],
+        name="cylinder",
+        type=mujoco.mjtGeom.mjGEOM_CYLINDER,
+        size=[radius_m, 0.15, 0],
         quat=[np.cos(np.pi / 4), np.sin(np.pi / 4), 0, 0],  # axis along y: fingers wrap over it
     )
     palm_r = 0.13 * cfg.breadth_m

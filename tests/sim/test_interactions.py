@@ -53,10 +53,14 @@ def test_plan_directions_follow_the_action(action):
 def test_front_puts_fingers_across_the_link_and_side_along_it():
     part = get_part("forearm")
     rng = np.random.default_rng(1)
-    front = [plan_hand_interaction("push_away", "front", SUBJECTS[2], part, rng).yaw_rad
-             for _ in range(20)]
-    side = [plan_hand_interaction("push_away", "side", SUBJECTS[2], part, rng).yaw_rad
-            for _ in range(20)]
+    front = [
+        plan_hand_interaction("push_away", "front", SUBJECTS[2], part, rng).yaw_rad
+        for _ in range(20)
+    ]
+    side = [
+        plan_hand_interaction("push_away", "side", SUBJECTS[2], part, rng).yaw_rad
+        for _ in range(20)
+    ]
     assert np.median(np.abs(np.sin(front))) > 0.85  # hand x across the link axis
     assert np.median(np.abs(np.cos(side))) > 0.85  # hand x along it
 
@@ -65,8 +69,10 @@ def test_force_scales_with_the_subject():
     part = get_part("forearm")
     weak = dataclasses.replace(SUBJECTS[0], force_scale=0.5)
     strong = dataclasses.replace(SUBJECTS[0], force_scale=2.0)
-    f = [plan_hand_interaction("grasp", "front", s, part, np.random.default_rng(3)).force_n
-         for s in (weak, strong)]
+    f = [
+        plan_hand_interaction("grasp", "front", s, part, np.random.default_rng(3)).force_n
+        for s in (weak, strong)
+    ]
     assert f[1] / f[0] == pytest.approx(4.0)
 
 

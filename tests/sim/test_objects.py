@@ -83,10 +83,17 @@ def test_lowest_point_is_the_root_plane(kind: str) -> None:
     xy = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
     below = np.column_stack([xy, np.full(len(xy), -3e-4)])
     above = np.column_stack([xy, np.full(len(xy), 3e-4)])
-    sd = [(signed_distance(model.geom_type[i], model.geom_size[i], data.geom_xpos[i],
-                           data.geom_xmat[i], below).min(),
-           signed_distance(model.geom_type[i], model.geom_size[i], data.geom_xpos[i],
-                           data.geom_xmat[i], above).min()) for i in range(model.ngeom)]
+    sd = [
+        (
+            signed_distance(
+                model.geom_type[i], model.geom_size[i], data.geom_xpos[i], data.geom_xmat[i], below
+            ).min(),
+            signed_distance(
+                model.geom_type[i], model.geom_size[i], data.geom_xpos[i], data.geom_xmat[i], above
+            ).min(),
+        )
+        for i in range(model.ngeom)
+    ]
     assert min(s[0] for s in sd) > 0
     assert min(s[1] for s in sd) < 6e-4  # within the grid step's reach of the surface
 
@@ -100,15 +107,20 @@ def test_instances_are_deterministic(kind: str) -> None:
 
 # Argued ranges (sim/objects.py), checked over 30 instances each: (dimension key, low, high) m.
 RANGES = {
-    "ball": [("radius", 0.02, 0.11)], "box": [("half_x", 0.02, 0.15), ("half_z", 0.01, 0.08)],
-    "cylinder_side": [("radius", 0.01, 0.05)], "cylinder_end": [("radius", 0.008, 0.045)],
-    "plate_edge": [("thickness", 0.002, 0.012)], "ruler": [("half_length", 0.075, 0.25)],
-    "mug": [("radius", 0.035, 0.048)], "hammer": [("length", 0.25, 0.33)],
+    "ball": [("radius", 0.02, 0.11)],
+    "box": [("half_x", 0.02, 0.15), ("half_z", 0.01, 0.08)],
+    "cylinder_side": [("radius", 0.01, 0.05)],
+    "cylinder_end": [("radius", 0.008, 0.045)],
+    "plate_edge": [("thickness", 0.002, 0.012)],
+    "ruler": [("half_length", 0.075, 0.25)],
+    "mug": [("radius", 0.035, 0.048)],
+    "hammer": [("length", 0.25, 0.33)],
     "rake": [("tine_radius", 0.006, 0.011), ("spacing", 0.015, 0.025)],
     "comb": [("tooth_width", 0.012, 0.022), ("spacing", 0.015, 0.025)],
     "rod_bundle": [("radius_mean", 0.006, 0.011), ("spacing", 0.015, 0.025)],
     "cushion": [("half_x", 0.12, 0.25), ("half_z", 0.03, 0.07)],
-    "big_ball": [("radius", 0.12, 0.33)], "bundle": [("n_lumps", 3, 5)],
+    "big_ball": [("radius", 0.12, 0.33)],
+    "bundle": [("n_lumps", 3, 5)],
 }
 
 

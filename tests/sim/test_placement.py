@@ -55,8 +55,9 @@ def test_hands_and_non_hands_aim_with_the_same_draw(forearm):
 
 def test_plate_edge_is_found_at_its_border():
     plate = get_part("plate")  # 0.2 m square, top face z = 0
-    edge = placement.edge_distance_m(plate, np.zeros(3), np.array([0, 0, 1.0]),
-                                     np.array([1.0, 0, 0]), 0.2)
+    edge = placement.edge_distance_m(
+        plate, np.zeros(3), np.array([0, 0, 1.0]), np.array([1.0, 0, 0]), 0.2
+    )
     assert edge == pytest.approx(0.1, abs=2 * placement.EDGE_STEP_M)
 
 
@@ -76,6 +77,7 @@ def test_forearm_edge_matches_the_superellipse_section(forearm):
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
     expected = arc[np.argmax(angle >= placement.EDGE_ANGLE_DEG)]
     start = np.array([s * shape.width_m / 2, 0.0, z])
-    got = placement.edge_distance_m(forearm, start, np.array([1.0, 0, 0]),
-                                    np.array([0, 1.0, 0]), 0.15)
+    got = placement.edge_distance_m(
+        forearm, start, np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), 0.15
+    )
     assert got == pytest.approx(expected, abs=2 * placement.EDGE_STEP_M + 0.002)

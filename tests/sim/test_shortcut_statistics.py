@@ -29,8 +29,11 @@ def data() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     state = build_state(GenerateConfig(n=N_SAMPLES, seed=SEED))
     samples = [sample_at(i, state)[0] for i in range(N_SAMPLES)]
     hand = np.array([int(s["is_hand"]) for s in samples])
-    groups = group_ids(hand, np.array([int(s["subject_id"]) for s in samples]),
-                       np.array([int(s["instance_id"]) for s in samples]))
+    groups = group_ids(
+        hand,
+        np.array([int(s["subject_id"]) for s in samples]),
+        np.array([int(s["instance_id"]) for s in samples]),
+    )
     return image_features(np.stack([s["image"] for s in samples])), hand, groups
 
 

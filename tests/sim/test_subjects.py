@@ -58,8 +58,12 @@ def test_split_rejects_duplicate_ids():
 
 @pytest.mark.parametrize(
     "kwargs, field",
-    [({"force_scale": 0.0}, "force_scale"), ({"approach_deg": 120.0}, "approach_deg"),
-     ({"pose_noise_deg": -1.0}, "pose_noise_deg"), ({"subject_id": ""}, "subject_id")],
+    [
+        ({"force_scale": 0.0}, "force_scale"),
+        ({"approach_deg": 120.0}, "approach_deg"),
+        ({"pose_noise_deg": -1.0}, "pose_noise_deg"),
+        ({"subject_id": ""}, "subject_id"),
+    ],
 )
 def test_subject_out_of_range_names_the_field(kwargs, field):
     with pytest.raises(ConfigError, match=field):

@@ -67,9 +67,25 @@ def test_view_command_writes_pictures(tmp_path: Path):
     app = typer.Typer()
     register(app)
     app.callback()(lambda: None)
-    args = ["view", "--part", "plate", "--index", "2", "--color", "label", "--width", "320",
-            "--height", "160", "--png", str(tmp_path / "v.png"), "--panel",
-            str(tmp_path / "p.png"), "--sequence", str(tmp_path / "s.gif")]
+    args = [
+        "view",
+        "--part",
+        "plate",
+        "--index",
+        "2",
+        "--color",
+        "label",
+        "--width",
+        "320",
+        "--height",
+        "160",
+        "--png",
+        str(tmp_path / "v.png"),
+        "--panel",
+        str(tmp_path / "p.png"),
+        "--sequence",
+        str(tmp_path / "s.gif"),
+    ]
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.output
     view = np.asarray(Image.open(tmp_path / "v.png").convert("RGB"))
@@ -83,8 +99,9 @@ def test_view_command_explains_a_missing_prediction(tmp_path: Path):
     app = typer.Typer()
     register(app)
     app.callback()(lambda: None)
-    result = CliRunner().invoke(app, ["view", "--part", "plate", "--color", "prediction",
-                                      "--png", str(tmp_path / "v.png")])
+    result = CliRunner().invoke(
+        app, ["view", "--part", "plate", "--color", "prediction", "--png", str(tmp_path / "v.png")]
+    )
     assert result.exit_code == 2 and "--pred" in result.output
 
 
@@ -94,8 +111,23 @@ def _view(tmp_path: Path, name: str, *extra: str) -> np.ndarray:
     register(app)
     app.callback()(lambda: None)
     png = tmp_path / f"{name}.png"
-    result = CliRunner().invoke(app, ["view", "--part", "plate", "--index", "2", "--width",
-                                      "320", "--height", "160", "--png", str(png), *extra])
+    result = CliRunner().invoke(
+        app,
+        [
+            "view",
+            "--part",
+            "plate",
+            "--index",
+            "2",
+            "--width",
+            "320",
+            "--height",
+            "160",
+            "--png",
+            str(png),
+            *extra,
+        ],
+    )
     assert result.exit_code == 0, result.output
     return np.asarray(Image.open(png).convert("RGB")).astype(int)
 
@@ -110,8 +142,7 @@ def test_view_draws_per_taxel_labels_saved_by_predict(tmp_path: Path):
     np.save(tmp_path / "other.npy", np.where(labels > 0, 0, 6).astype(np.uint8))
     truth = _view(tmp_path, "truth", "--color", "label")
     same = _view(tmp_path, "same", "--color", "prediction", "--pred", str(tmp_path / "same.npy"))
-    other = _view(tmp_path, "other", "--color", "prediction", "--pred",
-                  str(tmp_path / "other.npy"))
+    other = _view(tmp_path, "other", "--color", "prediction", "--pred", str(tmp_path / "other.npy"))
     below = slice(CAPTION_PX, None)  # the captions differ: "skin: label" / "skin: prediction"
     differs = lambda a, b: np.mean(np.any(np.abs(a[below] - b[below]) > 8, axis=-1))  # noqa: E731
     assert differs(truth, same) == 0.0
@@ -122,7 +153,18 @@ def test_view_explains_a_missing_labels_file(tmp_path: Path):
     app = typer.Typer()
     register(app)
     app.callback()(lambda: None)
-    result = CliRunner().invoke(app, ["view", "--part", "plate", "--color", "prediction",
-                                      "--pred", str(tmp_path / "none.npy"), "--png",
-                                      str(tmp_path / "v.png")])
+    result = CliRunner().invoke(
+        app,
+        [
+            "view",
+            "--part",
+            "plate",
+            "--color",
+            "prediction",
+            "--pred",
+            str(tmp_path / "none.npy"),
+            "--png",
+            str(tmp_path / "v.png"),
+        ],
+    )
     assert result.exit_code == 2 and "--save-labels" in result.output, result.output

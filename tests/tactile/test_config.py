@@ -32,7 +32,7 @@ class Outer:
 
 def test_toml_file_fills_nested_fields_and_keeps_defaults(tmp_path: Path):
     path = tmp_path / "c.toml"
-    path.write_text('n = 5\n[inner]\nnoise_counts = 20\nshape = [34, 50]\n')
+    path.write_text("n = 5\n[inner]\nnoise_counts = 20\nshape = [34, 50]\n")
     cfg = load_config(path, Outer)
     assert cfg == Outer(n=5, inner=Inner(noise_counts=20.0, shape=(34, 50)))
 

@@ -28,15 +28,31 @@ def dataset(tmp_path_factory):
         p = rng.uniform(0, 100, layout.n_taxels) * (rng.uniform(size=layout.n_taxels) < 0.4)
         hand = i % 2 == 0
         labels = rng.integers(1, 7, layout.n_taxels).astype(np.uint8) * hand
-        samples.append({
-            "raw": p.astype(np.uint16), "pressure_pa": p.astype(np.float32),
-            "image": tmap.image(p), "taxel_label": labels,
-            "label_image": tmap.label_image(p, labels) if hand else np.zeros(tmap.shape, np.uint8),
-            "is_hand": np.uint8(hand), "action": np.int8(i % 4 // 2 if hand else -1),
-            "subject_id": np.int32(2 if hand else -1), "instance_id": np.int32(-1 if hand else 9),
-        })  # fmt: skip
-    w = DatasetWriter(folder, config={}, part="p", generator_version="t", seed=0, tmap=tmap,
-                      layout=layout, attrs={"actions": ACTIONS})  # fmt: skip
+        samples.append(
+            {
+                "raw": p.astype(np.uint16),
+                "pressure_pa": p.astype(np.float32),
+                "image": tmap.image(p),
+                "taxel_label": labels,
+                "label_image": tmap.label_image(p, labels)
+                if hand
+                else np.zeros(tmap.shape, np.uint8),
+                "is_hand": np.uint8(hand),
+                "action": np.int8(i % 4 // 2 if hand else -1),
+                "subject_id": np.int32(2 if hand else -1),
+                "instance_id": np.int32(-1 if hand else 9),
+            }
+        )
+    w = DatasetWriter(
+        folder,
+        config={},
+        part="p",
+        generator_version="t",
+        seed=0,
+        tmap=tmap,
+        layout=layout,
+        attrs={"actions": ACTIONS},
+    )
     w.write_chunk(0, samples)
     w.merge()
     return folder
@@ -47,12 +63,16 @@ def test_export_writes_the_supplementary_tree(tmp_path, dataset):
     assert written == {"hand": 3, "labels": 3, "non_hand": 3}
     names = {p.relative_to(tmp_path / "png").as_posix() for p in (tmp_path / "png").rglob("*.png")}
     assert names == {
-        "hand/000000_subject2_grasp.png", "hand/000002_subject2_side-touch.png",
-        "hand/000004_subject2_grasp.png", "labels/000000_subject2_grasp.png",
-        "labels/000002_subject2_side-touch.png", "labels/000004_subject2_grasp.png",
-        "non_hand/000001_instance9.png", "non_hand/000003_instance9.png",
+        "hand/000000_subject2_grasp.png",
+        "hand/000002_subject2_side-touch.png",
+        "hand/000004_subject2_grasp.png",
+        "labels/000000_subject2_grasp.png",
+        "labels/000002_subject2_side-touch.png",
+        "labels/000004_subject2_grasp.png",
+        "non_hand/000001_instance9.png",
+        "non_hand/000003_instance9.png",
         "non_hand/000005_instance9.png",
-    }  # fmt: skip
+    }
     ds = open_dataset(dataset)
     grey = np.asarray(Image.open(tmp_path / "png/non_hand/000003_instance9.png"))
     np.testing.assert_array_equal(grey, ds.image[3])
@@ -77,8 +97,17 @@ def test_cli_export_and_ingest(tmp_path, dataset):
     frames = np.random.default_rng(0).integers(0, 500, (4, layout.n_taxels))
     np.save(tmp_path / "frames.npy", frames)
     (tmp_path / "labels.csv").write_text("1\n0\n0\n1\n")
-    args = ["ingest", str(tmp_path / "layout.csv"), str(tmp_path / "frames.npy"), "--out",
-            str(tmp_path / "rec"), "--labels", str(tmp_path / "labels.csv"), "--step-mm", "2"]
+    args = [
+        "ingest",
+        str(tmp_path / "layout.csv"),
+        str(tmp_path / "frames.npy"),
+        "--out",
+        str(tmp_path / "rec"),
+        "--labels",
+        str(tmp_path / "labels.csv"),
+        "--step-mm",
+        "2",
+    ]
     result = runner.invoke(app(), args)
     assert result.exit_code == 0, result.output
     ds = open_dataset(tmp_path / "rec")

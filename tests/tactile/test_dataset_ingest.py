@@ -26,8 +26,13 @@ def recording(tmp_path_factory):
     n = base.n_taxels
     rng = np.random.default_rng(7)
     channels = rng.permutation(n + EXTRA_CHANNELS)[:n]
-    layout = TaxelLayout(base.positions_m, base.normals, channel_ids=channels,
-                         n_channels=n + EXTRA_CHANNELS, name="sector")  # fmt: skip
+    layout = TaxelLayout(
+        base.positions_m,
+        base.normals,
+        channel_ids=channels,
+        n_channels=n + EXTRA_CHANNELS,
+        name="sector",
+    )
     layout.save(folder / "layout.csv")
     centres = layout.positions_m[rng.choice(n, T)]
     dist2 = ((layout.positions_m[None] - centres[:, None]) ** 2).sum(-1)
@@ -41,12 +46,20 @@ def recording(tmp_path_factory):
     np.save(folder / "frames.npy", chan)
     write_csv(folder / "baseline.csv", base_frames)
     hand = np.array([1, 0, 1, 1, 0, 1])
-    (folder / "labels.csv").write_text("label\n" + "\n".join(
-        ["hand" if h else "non_hand" for h in hand]) + "\n")  # fmt: skip
+    (folder / "labels.csv").write_text(
+        "label\n" + "\n".join(["hand" if h else "non_hand" for h in hand]) + "\n"
+    )
     parts = (rng.integers(1, 7, (T, n)) * (blob > 0)).astype(np.int64)
     np.save(folder / "parts.npy", parts)
-    return {"dir": folder, "layout": layout, "blob": blob, "baseline": baseline, "hand": hand,
-            "parts": parts, "channels": chan}  # fmt: skip
+    return {
+        "dir": folder,
+        "layout": layout,
+        "blob": blob,
+        "baseline": baseline,
+        "hand": hand,
+        "parts": parts,
+        "channels": chan,
+    }
 
 
 def write_csv(path: Path, arr: np.ndarray, header: bool = False) -> None:
@@ -58,9 +71,13 @@ def write_csv(path: Path, arr: np.ndarray, header: bool = False) -> None:
 def test_channel_frames_round_trip(tmp_path, recording):
     d = recording["dir"]
     ingest_recording(
-        d / "layout.csv", d / "frames.csv", tmp_path / "out", labels_path=d / "labels.csv",
-        part_labels_path=d / "parts.npy", baseline_path=d / "baseline.csv",
-    )  # fmt: skip
+        d / "layout.csv",
+        d / "frames.csv",
+        tmp_path / "out",
+        labels_path=d / "labels.csv",
+        part_labels_path=d / "parts.npy",
+        baseline_path=d / "baseline.csv",
+    )
     ds = open_dataset(tmp_path / "out")
     tmap = TactileMap.build(TaxelLayout.load(d / "layout.csv"))
     blob, parts, hand = recording["blob"], recording["parts"], recording["hand"]
@@ -74,8 +91,14 @@ def test_channel_frames_round_trip(tmp_path, recording):
         np.testing.assert_array_equal(ds.label_image[t], want)
     np.testing.assert_array_equal(ds.attrs["skin_baseline_counts"], recording["baseline"])
     np.testing.assert_array_equal(ds.images_from_raw(ds.raw[:]), ds.image[:])
-    assert set(ds.info["fields"]) == {"raw", "pressure_pa", "taxel_label", "image",
-                                      "label_image", "is_hand"}  # fmt: skip
+    assert set(ds.info["fields"]) == {
+        "raw",
+        "pressure_pa",
+        "taxel_label",
+        "image",
+        "label_image",
+        "is_hand",
+    }
 
 
 def test_taxel_frames_without_baseline(tmp_path, recording):
@@ -136,8 +159,13 @@ def _corrupt(tmp: Path, rec: dict, case: str) -> dict:
     paths = {"layout_path": d / "layout.csv", "frames_path": d / "frames.csv"}
     bad = tmp / "bad.csv"
     if case in ("nan", "negative", "too_big", "fraction", "word"):
-        value = {"nan": "nan", "negative": "-3", "too_big": "70000", "fraction": "12.5",
-                 "word": "abc"}[case]  # fmt: skip
+        value = {
+            "nan": "nan",
+            "negative": "-3",
+            "too_big": "70000",
+            "fraction": "12.5",
+            "word": "abc",
+        }[case]
         lines = [",".join(str(v) for v in row) for row in chan]
         cells = lines[2].split(",")
         cells[1] = value

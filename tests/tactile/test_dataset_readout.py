@@ -8,8 +8,12 @@ import pytest
 from tactile.dataset.readout import NOISE_FLOOR_SIGMAS, Readout
 from tactile.errors import DataError
 
-ATTRS = {"skin_counts_per_pa": 0.5, "skin_baseline_counts": np.array([4000.0, 4100.0, 3900.0]),
-         "skin_drift_counts_per_s": np.array([2.0, -1.0, 0.0]), "skin_noise_floor_counts": 300.0}
+ATTRS = {
+    "skin_counts_per_pa": 0.5,
+    "skin_baseline_counts": np.array([4000.0, 4100.0, 3900.0]),
+    "skin_drift_counts_per_s": np.array([2.0, -1.0, 0.0]),
+    "skin_noise_floor_counts": 300.0,
+}
 
 
 def test_baseline_drift_floor_and_gain_worked_by_hand():

@@ -73,8 +73,9 @@ def test_keyed_split_matches_the_slow_reference_draw_by_draw(keyed_reference):
     reference, sides_of = keyed_reference
     is_hand, subject_id, instance_id = population()
     for seed, stream in ((4, 0), (4, 1), (11, 0)):
-        split = split_indices(is_hand, subject_id, instance_id, seed=seed, method="keyed",
-                              stream=stream)  # fmt: skip
+        split = split_indices(
+            is_hand, subject_id, instance_id, seed=seed, method="keyed", stream=stream
+        )
         sides = sides_of(subject_id, instance_id, split.train)
         assert sides == reference(set(sides), seed, stream=stream)
     assert np.array_equal(np.sort(np.r_[split.train, split.test]), np.arange(len(is_hand)))
@@ -88,11 +89,15 @@ def test_keyed_sides_do_not_depend_on_sample_counts_or_on_other_units(keyed_refe
     keep = rng.random(len(a[0])) < 0.8  # a fifth of the samples rejected on the other skin
     b = tuple(x[keep] for x in a)
     extra_subj = np.repeat(np.arange(30, 60), 12)  # a larger dataset: 30 more subjects
-    c = (np.r_[a[0], np.ones(len(extra_subj), np.uint8)], np.r_[a[1], extra_subj],
-         np.r_[a[2], np.full(len(extra_subj), -1)])
+    c = (
+        np.r_[a[0], np.ones(len(extra_subj), np.uint8)],
+        np.r_[a[1], extra_subj],
+        np.r_[a[2], np.full(len(extra_subj), -1)],
+    )
     sides_of = keyed_reference[1]
-    keyed = [sides_of(d[1], d[2], split_indices(*d, seed=4, method="keyed").train)
-             for d in (a, b, c)]  # fmt: skip
+    keyed = [
+        sides_of(d[1], d[2], split_indices(*d, seed=4, method="keyed").train) for d in (a, b, c)
+    ]
     greedy = [sides_of(d[1], d[2], split_indices(*d, seed=4).train) for d in (a, b, c)]
     for k in (1, 2):
         common = keyed[0].keys() & keyed[k].keys()
@@ -115,8 +120,14 @@ def test_keyed_fraction_follows_the_binomial_spread():
 
 def test_keyed_split_keeps_both_sides_for_two_units_of_a_class():
     """Two subjects whose draws are both above 0.001 (almost surely): one is moved to train."""
-    split = split_indices(np.array([1, 1, 1, 1]), np.array([0, 0, 1, 1]), None, seed=0,
-                          train_fraction=0.001, method="keyed")
+    split = split_indices(
+        np.array([1, 1, 1, 1]),
+        np.array([0, 0, 1, 1]),
+        None,
+        seed=0,
+        train_fraction=0.001,
+        method="keyed",
+    )
     assert len(split.train) == 2 and len(split.test) == 2
 
 

@@ -65,11 +65,20 @@ def make_sample(tmap: TactileMap, i: int) -> dict:
 def writer(folder: Path, part, config: dict | None = None) -> DatasetWriter:
     layout, tmap = part
     return DatasetWriter(
-        folder, config=config or {"episodes": 20, "skin": {"noise": 0.01}}, part="sector",
-        generator_version="test-1", seed=11, tmap=tmap, layout=layout, seq_len=SEQ_LEN,
-        attrs={"skin_counts_per_pa": 0.5, "skin_baseline_counts": 4000.0,
-               "actions": ["grasp", "poke", "slide"]},
-    )  # fmt: skip
+        folder,
+        config=config or {"episodes": 20, "skin": {"noise": 0.01}},
+        part="sector",
+        generator_version="test-1",
+        seed=11,
+        tmap=tmap,
+        layout=layout,
+        seq_len=SEQ_LEN,
+        attrs={
+            "skin_counts_per_pa": 0.5,
+            "skin_baseline_counts": 4000.0,
+            "actions": ["grasp", "poke", "slide"],
+        },
+    )
 
 
 def write_all(folder: Path, part, chunks=(0, 1, 2)) -> DatasetWriter:
@@ -120,9 +129,12 @@ def test_field_access_info_and_pickle(tmp_path, part):
     ds = open_dataset(tmp_path / "ds")
     np.testing.assert_array_equal(ds.raw[2:4], ds["raw"][2:4])
     assert ds.info["fields"]["raw"] == {
-        "path": "samples/raw", "dtype": "uint16", "shape": [part[0].n_taxels], "unit": "count",
+        "path": "samples/raw",
+        "dtype": "uint16",
+        "shape": [part[0].n_taxels],
+        "unit": "count",
         "description": ds.info["fields"]["raw"]["description"],
-    }  # fmt: skip
+    }
     assert ds.info["fields"]["image"]["shape"] == list(part[1].shape)
     assert ds.info["dims"]["T"] == SEQ_LEN
     _ = ds.map

@@ -19,10 +19,21 @@ from tactile.layout import TaxelLayout
 from tactile.synthetic import cylinder_sector_layout
 
 SUMMARY_FILES = [
-    "left_arm", "left_arm_mesh", "left_foot", "left_forearm_V2", "left_forearm_mesh",
-    "left_forearm_nomesh", "left_hand_V2_1", "left_leg_lower", "left_leg_upper", "right_arm",
-    "right_forearm_V2", "right_forearm_mesh", "right_leg_upper", "torso",
-]  # fmt: skip
+    "left_arm",
+    "left_arm_mesh",
+    "left_foot",
+    "left_forearm_V2",
+    "left_forearm_mesh",
+    "left_forearm_nomesh",
+    "left_hand_V2_1",
+    "left_leg_lower",
+    "left_leg_upper",
+    "right_arm",
+    "right_forearm_V2",
+    "right_forearm_mesh",
+    "right_leg_upper",
+    "torso",
+]
 
 
 def summary(icub_positions: Path) -> dict[str, dict[str, str]]:
