@@ -1,4 +1,5 @@
-"""Dataset generation speed (samples/s) for 1 and 2 workers, and peak memory (RSS).
+"""Dataset generation speed (samples/s) for 1 and 2 workers, peak memory (RSS), the time to
+refuse a folder of another configuration, and `sim.tiny.tiny_samples`' time for 8 samples.
 
 Runs `sim.generate.generate` on fresh temporary folders and prints wall time, samples/s, rejected
 episodes by reason and the peak resident set size of this process and of its worker processes
@@ -13,10 +14,13 @@ from __future__ import annotations
 import resource
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from sim.gen_config import load_generate_config
 from sim.generate import generate
+from sim.tiny import tiny_map, tiny_samples
+from tactile.errors import DataError
 
 
 def peak_rss_mib() -> tuple[float, float]:
@@ -38,9 +42,34 @@ def bench(n: int, part: str, workers: int) -> None:
     )
 
 
+def bench_refusal(part: str) -> None:
+    """Seconds until `generate` refuses a folder holding a dataset of another seed."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "ds"
+        generate(load_generate_config(None, n=4, part=part), out, workers=1, progress=False)
+        t0 = time.perf_counter()
+        try:
+            generate(load_generate_config(None, n=4, part=part, seed=1), out, progress=False)
+        except DataError:
+            pass
+        print(
+            f"{part}: folder of another configuration refused in {time.perf_counter() - t0:.2f} s"
+        )
+
+
+def bench_tiny(n: int = 8) -> None:
+    """Seconds of `tiny_samples(n)` once the tiny part and map are built."""
+    tiny_map()
+    t0 = time.perf_counter()
+    tiny_samples(n=n, seed=0)
+    print(f"tiny_samples({n}): {time.perf_counter() - t0:.2f} s after the part is built")
+
+
 def main(argv: list[str]) -> None:
     n = int(argv[0]) if argv else 256
     part = argv[1] if len(argv) > 1 else "forearm"
+    bench_tiny()
+    bench_refusal(part)
     for workers in [int(w) for w in argv[2:]] or [1, 2]:
         bench(n, part, workers)
 

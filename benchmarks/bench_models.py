@@ -5,19 +5,15 @@
 Prints, for each registered model at its default width, its `handskin train` preset's width
 (`learn.config`: 0.25 for VGG16, SegNet and FCN-16s) and any extra ``--widths``, the
 parameter count and the median ms / image with 1 and 2 CPU threads, as built (eval mode) and
-after ``prepare_for_inference`` (batch norm folded, channels-last), and that float path compiled
-by TorchInductor with frozen weights (``learn.compiled``, ``handskin evaluate --compile``;
-"n/a" where it cannot compile), against the targets of the learning issue (HandsNet ≤ 3 ms,
-SegNet ≤ 60 ms per image on one CPU core, judged on the faster of prepared and compiled).
-Then the ensemble of the CPU segmenter presets (SegNet and FCN-16s at width 0.25, the mean of
-their softmax: ``handskin evaluate --ensemble``), with and without test-time flips, prepared
-and compiled, against the same SegNet target. Then HandsNet as an int8 network
-(``learn.quantize``, oneDNN; activation ranges from 64 seeded sparse random images, which set
-the scales but not the kernels' speed) against the prepared float one and the same target.
-Each figure is the least, over ``--rounds`` rounds in which a row's paths take turns, of the
-median of ``--runs`` runs: a shared machine's slow spells (1.5x on HandsNet within minutes, seen
-here) then weigh on every path of a row alike. Figures are printed, never asserted: they depend
-on the machine and its load.
+after ``prepare_for_inference`` (batch norm folded, channels-last), against the targets
+HandsNet ≤ 3 ms and SegNet ≤ 60 ms per image on one CPU core. Then the ensemble of the CPU
+segmenter presets (SegNet and FCN-16s at width 0.25, the mean of their softmax: ``handskin
+evaluate --ensemble``), with and without test-time flips, against the same SegNet target. Then
+HandsNet as an int8 network (``learn.infer.quantize``, oneDNN; activation ranges from 64 seeded
+sparse random images, which set the scales but not the kernels' speed) against the prepared
+float one. Each figure is the least, over ``--rounds`` rounds in which a row's paths take
+turns, of the median of ``--runs`` runs, so a shared machine's slow spells weigh on every path
+of a row alike. Figures are printed, never asserted: they depend on the machine and its load.
 """
 
 from __future__ import annotations
@@ -29,15 +25,13 @@ import torch
 from torch import nn
 
 from learn import config as C
-from learn.compiled import CompileUnavailable, compile_at
-from learn.ensemble import MeanSoftmax
-from learn.fastpath import fast_inference, interleaved_cpu_ms
-from learn.metrics import time_per_image
+from learn.infer.ensemble import FlipTTA, MeanSoftmax
+from learn.infer.fastpath import interleaved_cpu_ms, time_per_image
+from learn.infer.quantize import int8_supported, quantize_int8
+from learn.inputs import PAPER_VIEWS
 from learn.models import MODELS, count_parameters, create_model, prepare_for_inference
-from learn.quantize import int8_supported, quantize_int8
-from learn.tta import PAPER_VIEWS, FlipTTA
 
-TARGET_MS_ONE_CORE = {"handsnet": 3.0, "segnet": 60.0}  # from the learning issue
+TARGET_MS_ONE_CORE = {"handsnet": 3.0, "segnet": 60.0}  # ms per image, one CPU core
 
 
 PRESET_WIDTH = {
@@ -52,55 +46,39 @@ def default_width(arch: str) -> float | None:
 
 
 def timed(
-    nets: list[nn.Module | None], size: tuple[int, int], runs: int, rounds: int, threads: int
+    nets: list[nn.Module], size: tuple[int, int], runs: int, rounds: int, threads: int
 ) -> list[float]:
-    """ms / image of each network at ``threads`` threads (`learn.fastpath.interleaved_cpu_ms`:
-    the least over ``rounds`` rounds of the median of ``runs`` runs, the networks taking turns
-    within each round); NaN for None (not compiled)."""
-    ms = interleaved_cpu_ms(nets, size, threads, runs, rounds)
-    return [float("nan") if t is None else t for t in ms]
+    """ms / image of each network at ``threads`` threads (`interleaved_cpu_ms`: the least over
+    ``rounds`` rounds of the median of ``runs`` runs, the networks taking turns in each)."""
+    return interleaved_cpu_ms(nets, size, threads, runs, rounds)
 
 
-def compiled_or_none(net: nn.Module, size: tuple[int, int], threads: int) -> nn.Module | None:
-    """``net`` compiled (``learn.compiled.compile_at``) at ``threads`` threads, or None where
-    it cannot compile. Compiling resets torch's compiler: use it before the next one."""
-    try:
-        return compile_at(net, size, threads)
-    except CompileUnavailable:
-        return None
+def verdict(arch: str, ms_one_core: float) -> str:
+    target = TARGET_MS_ONE_CORE.get(arch)
+    if target is None:
+        return ""
+    return f"  target ≤ {target:g}: {'ok' if ms_one_core <= target else 'MISSED'}"
 
 
 def bench_one(arch: str, width: float | None, size: tuple[int, int], runs: int, rounds: int) -> str:
-    """One printed row: arch, width, parameters, ms / image at 1 and 2 threads as built,
-    prepared and compiled (and GPU)."""
+    """One printed row: arch, width, parameters, ms / image at 1 and 2 threads as built and
+    prepared (and on the GPU)."""
     kw = {"input_size": size} if arch == "handsnet" else {"width": width}
     model = create_model(arch, **kw).eval()
-    fast = prepare_for_inference(model)
-    by_threads = {}
-    for threads in (1, 2):
-        compiled = compiled_or_none(fast_inference(model, bf16=False), size, threads)
-        by_threads[threads] = timed([model, fast, compiled], size, runs, rounds, threads)
-    cells = [by_threads[t][i] for i in range(3) for t in (1, 2)]
+    nets = [model, prepare_for_inference(model)]
+    by_threads = {t: timed(nets, size, runs, rounds, t) for t in (1, 2)}
+    cells = [by_threads[t][i] for i in range(2) for t in (1, 2)]
     gpu = ""
     if torch.cuda.is_available():
         gpu = f"  gpu {1e3 * time_per_image(model, size, 'cuda', n_runs=runs):7.2f}"
-    target = TARGET_MS_ONE_CORE.get(arch)
-    verdict = ""
-    if target is not None:
-        best, path = min(
-            (cells[2], "prepared"),
-            (cells[4], "compiled"),
-            key=lambda c: c[0] if c[0] == c[0] else float("inf"),
-        )  # NaN: n/a
-        verdict = f"  target ≤ {target:g}: {'ok' if best <= target else 'MISSED'} ({path})"
     w = "fixed" if width is None else f"{width:g}"
-    times = "".join(f"{c:9.2f}" if c == c else f"{'n/a':>9s}" for c in cells)
-    return f"{arch:9s} {w:>6s} {count_parameters(model):>12,d}{times}{gpu}{verdict}"
+    times = "".join(f"{c:9.2f}" for c in cells)
+    return f"{arch:9s} {w:>6s} {count_parameters(model):>12,d}{times}{gpu}{verdict(arch, cells[2])}"
 
 
 def bench_ensemble(size: tuple[int, int], runs: int, rounds: int, width: float = 0.25) -> list[str]:
-    """Printed rows: SegNet + FCN-16s (mean softmax) at ``width``, prepared and compiled, 1 and
-    2 threads, without and with test-time flips, against the SegNet target on one core."""
+    """Printed rows: SegNet + FCN-16s (mean softmax) at ``width``, prepared, 1 and 2 threads,
+    without and with test-time flips, against the SegNet target on one core."""
     members = [
         prepare_for_inference(create_model(a, width=width).eval()) for a in ("segnet", "fcn16s")
     ]
@@ -109,16 +87,10 @@ def bench_ensemble(size: tuple[int, int], runs: int, rounds: int, width: float =
         ("mean", MeanSoftmax(members)),
         ("mean+flips", MeanSoftmax([FlipTTA(m, PAPER_VIEWS) for m in members])),
     ):
-        cells = {
-            t: timed([net, compiled_or_none(net, size, t)], size, runs, rounds, t) for t in (1, 2)
-        }
-        target = TARGET_MS_ONE_CORE["segnet"]
-        best = min(c for c in cells[1] if c == c)  # NaN: not compiled
+        (one,), (two,) = (timed([net], size, runs, rounds, t) for t in (1, 2))
         rows.append(
-            f"segnet+fcn16s {name:10s} w{width:g}: prep 1 {cells[1][0]:7.2f}, prep 2 "
-            f"{cells[2][0]:7.2f}, comp 1 {cells[1][1]:7.2f}, comp 2 {cells[2][1]:7.2f}  "
-            f"target ≤ {target:g}: {'ok' if best <= target else 'MISSED'} "
-            f"({best / target:.2f} of it)"
+            f"segnet+fcn16s {name:10s} w{width:g}: 1 thread {one:7.2f}, 2 threads {two:7.2f}"
+            + verdict("segnet", one)
         )
     return rows
 
@@ -157,12 +129,10 @@ def main() -> None:
         f"input 1 × 1 × {size[0]} × {size[1]}, batch 1, least over {args.rounds} rounds of "
         f"the median of {args.runs} runs, torch {torch.__version__}"
     )
-    print("ms / image: as built, prepared, compiled (each 1 thread, 2 threads)")
+    print("ms / image: as built, prepared (each 1 thread, 2 threads)")
     print(
         f"{'model':9s} {'width':>6s} {'parameters':>12s}"
-        + "".join(
-            f"{h:>9s}" for h in ("built 1", "built 2", "prep 1", "prep 2", "comp 1", "comp 2")
-        )
+        + "".join(f"{h:>9s}" for h in ("built 1", "built 2", "prep 1", "prep 2"))
     )
     for arch in MODELS:
         widths = [default_width(arch)]

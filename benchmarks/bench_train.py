@@ -3,10 +3,10 @@
     python benchmarks/bench_train.py [--images 320] [--threads 2] [--train-images 2113]
         [--precision fp32 bf16] [--size 68 100]
 
-Times one epoch of each preset's real training loop (``learn.train.train_epoch``: the
+Times one epoch of each preset's real training loop (``learn.train.loop.train_epoch``: the
 preset's views — the paper's flips —, loss and optimizer) over ``--images`` random images of
 the preset's input size, after a short warm-up epoch, and extrapolates to one epoch of
-``--train-images`` samples in each view (``learn.train.views_of``: 3 by default; 2,113 = the
+``--train-images`` samples in each view (``learn.train.loop.views_of``: 3 by default; 2,113 = the
 train part of the paper-sized forearm set after its validation share; segmenters see only its
 ~1,010 hand images) and to the preset's epochs. With two ``--precision`` values
 (``RunConfig.precision``: bf16 autocasts the forward pass) each arch is timed in both and the
@@ -23,10 +23,10 @@ import time
 
 import torch
 
-from learn.experiments.models import preset_run
-from learn.fastpath import bf16_supported
-from learn.folder import TensorData
-from learn.train import PRECISIONS, build, make_loss, train_epoch, views_of
+from learn.config import PRECISIONS, preset_run
+from learn.data.load import TensorData
+from learn.train.device import bf16_supported
+from learn.train.loop import build, make_loss, train_epoch, views_of
 
 HAND_SHARE = 1710 / 3530  # segmenters train on hand samples only (paper's class balance)
 
@@ -35,9 +35,9 @@ def images_per_second(
     arch: str, n: int, threads: int, precision: str = "fp32", size: tuple[int, int] | None = None
 ) -> tuple[float, object]:
     """Training images per second of ``arch``'s preset (input ``size`` (h, w) px if given): one
-    ``learn.train.train_epoch`` (the real step: views, loss, optimizer) over ``n`` random sparse
-    images in each of the preset's views, after a warm-up epoch over 64 of them; also returns
-    the run config."""
+    ``learn.train.loop.train_epoch`` (the real step: views, loss, optimizer) over ``n`` random
+    sparse images in each of the preset's views, after a warm-up epoch over 64 of them; also
+    returns the run config."""
     torch.set_num_threads(threads)
     run = dataclasses.replace(preset_run(arch), precision=precision)
     if size is not None:

@@ -1,4 +1,4 @@
-"""The `handskin` console command: one typer app whose subcommands live beside their packages."""
+"""The `handskin` console command: one typer app; each package adds its subcommands."""
 
 from __future__ import annotations
 
@@ -6,7 +6,13 @@ from typing import Annotated
 
 import typer
 
+from experiments.cli import register as register_experiments
 from handskin import __version__
+from learn.cli import register as register_learn
+from sim.cli import register as register_sim
+from sim.view_cli import register as register_view
+from tactile.cli import register as register_tactile
+from tactile.dataset.cli import register as register_dataset
 
 app = typer.Typer(
     name="handskin",
@@ -33,23 +39,15 @@ def _root(
     """handskin: tactile maps, synthetic tactile datasets and touch-recognition models."""
 
 
-def _register() -> None:
-    from learn.cli import register as register_learn
-    from learn.experiments.cli import register as register_experiments
-    from sim.cli import register as register_sim
-    from sim.view_cli import register as register_view
-    from tactile.cli import register as register_tactile
-    from tactile.dataset.cli import register as register_dataset
-
-    register_tactile(app)
-    register_sim(app)
-    register_dataset(app)
-    register_view(app)
-    register_learn(app)
-    register_experiments(app, extra_modules=("handskin.transfer", "handskin.fidelity"))
-
-
-_register()
+for register in (
+    register_tactile,
+    register_sim,
+    register_dataset,
+    register_view,
+    register_learn,
+    register_experiments,
+):
+    register(app)
 
 
 def main() -> None:

@@ -1,5 +1,6 @@
 """Network inputs from tactile images, one rule for training, evaluation, prediction and the
-experiments (torch-free, so the robustness experiments' frame code can use it too)."""
+experiments, and the flipped views the networks are trained and tested in (torch-free: numpy
+arrays, or torch tensors where said)."""
 
 from __future__ import annotations
 
@@ -7,10 +8,27 @@ import numpy as np
 
 from tactile.resize import canvas_px, fit_canvas, resize_image, resize_labels
 
-#: The rule of `net_input`, stored in every checkpoint (``learn.checkpoint``): segmentation
+#: The rule of `net_input`, stored in every checkpoint (``learn.train.checkpoint``): segmentation
 #: inputs on their labels' support since this name; a segmenter without it was trained on
 #: inputs blurred past that support and is refused.
 INPUTS = "segment-on-label-support"
+
+
+#: Axes each view reverses on a (..., H, W) array: 0 original, 1 columns (a horizontal flip),
+#: 2 rows (a vertical flip), 3 both (a 180-degree turn).
+VIEW_DIMS: dict[int, tuple[int, ...]] = {0: (), 1: (-1,), 2: (-2,), 3: (-2, -1)}
+
+#: The paper's threefold augmentation: original, columns reversed, rows reversed.
+PAPER_VIEWS: tuple[int, ...] = (0, 1, 2)
+
+
+def flip_view(x, view: int):
+    """``x`` (..., H, W), a numpy array (as a strided view, no copy) or a torch tensor, in view
+    ``view`` (`VIEW_DIMS`); a flip is its own inverse."""
+    dims = VIEW_DIMS[int(view)]
+    if not dims:
+        return x
+    return np.flip(x, dims) if isinstance(x, np.ndarray) else x.flip(dims)
 
 
 def net_input(
@@ -59,7 +77,7 @@ def unpressed_as_background(pred, x):
     """Per-pixel class ids ``pred`` (S, h, w) with every pixel whose input ``x`` (S, 1, h, w) is
     0 set to background (0): no pressure, no contact. With `net_input`'s segmentation inputs
     those are exactly the pixels the labels call background for want of pressure, and
-    ``learn.predict.segment`` applies the same rule on the map grid. Median-frequency weights
+    ``learn.infer.predict.segment`` applies the same rule on the map grid. Median-frequency weights
     make a background pixel ~50x cheaper to miss than a finger's, so without the rule a
     segmenter paints fingers on the empty pixels around a print (95,000 of them on the forearm
     test set, 44.2 % against 53.5 % mIoU). numpy arrays or torch tensors; same type back."""

@@ -1,4 +1,4 @@
-"""Metrics as pure functions of label tensors or of a confusion matrix, and inference timing.
+"""Metrics as pure functions of label tensors or of a confusion matrix.
 
 The confusion matrix ``cm`` is ``(C, C)`` int64 with ``cm[i, j]`` = samples (or pixels) of true
 class ``i`` predicted as ``j`` (Long et al.'s ``n_ij``). Segmentation scores follow Long,
@@ -8,13 +8,9 @@ Shelhamer & Darrell (CVPR 2015, Sec. 5), with classes absent from the ground tru
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import torch
-from torch import nn
 
-from learn.numerics import flushing
 from tactile.errors import DataError
 
 ArrayLike = np.ndarray | torch.Tensor
@@ -95,22 +91,6 @@ def frequency_weighted_iou(cm: ArrayLike) -> float:
     return float((t_i * class_ious(cm).nan_to_num(0.0)).sum() / t_i.sum())
 
 
-def merge_classes(cm: ArrayLike, groups: list[list[int]]) -> torch.Tensor:
-    """The ``(G, G)`` confusion matrix of class groups: ``out[a, b] = Σ cm[groups[a], groups[b]]``.
-
-    Every class must be in exactly one group (e.g. ``[[0], [2, 5], ...]`` scores index and
-    pinkie as one class).
-    """
-    cm = torch.as_tensor(np.asarray(cm), dtype=torch.int64)
-    flat = sorted(c for g in groups for c in g)
-    if flat != list(range(cm.shape[0])):
-        raise DataError(f"groups {groups} must hold each class 0..{cm.shape[0] - 1} once")
-    onehot = torch.zeros(cm.shape[0], len(groups), dtype=torch.int64)
-    for a, g in enumerate(groups):
-        onehot[g, a] = 1
-    return onehot.T @ cm @ onehot
-
-
 def without_true_class(cm: ArrayLike, c: int = 0) -> torch.Tensor:
     """``cm`` with true class ``c``'s row zeroed: scores over the other classes' pixels only.
 
@@ -134,34 +114,3 @@ def segmentation_scores(cm: ArrayLike) -> dict[str, float]:
         "mean_iou": mean_iou(cm),
         "fw_iou": frequency_weighted_iou(cm),
     }
-
-
-@flushing()
-def time_per_image(
-    model: nn.Module,
-    input_size: tuple[int, int] = (68, 100),
-    device: str | torch.device = "cpu",
-    *,
-    n_warmup: int = 10,
-    n_runs: int = 50,
-) -> float:
-    """Median inference time per image in seconds, at batch size 1 after ``n_warmup`` runs.
-
-    The model runs in eval mode under ``torch.inference_mode`` on a ``(1, in_channels, H, W)``
-    random input on ``device`` (CUDA is synchronised around each run). The thread count is the
-    caller's (``torch.set_num_threads``). The model is left on ``device`` in eval mode.
-    """
-    device = torch.device(device)
-    model = model.to(device).eval()
-    x = torch.rand(1, getattr(model, "in_channels", 1), *input_size, device=device)
-    sync = torch.cuda.synchronize if device.type == "cuda" else (lambda: None)
-    times = []
-    with torch.inference_mode():
-        for i in range(n_warmup + n_runs):
-            sync()
-            start = time.perf_counter()
-            model(x)
-            sync()
-            if i >= n_warmup:
-                times.append(time.perf_counter() - start)
-    return float(np.median(times))

@@ -9,7 +9,8 @@ values rounded, circumferences turned into radii by C / 2 pi):
 - upper arm (biceps, relaxed) circumference 25-37 cm -> radius 40-58 mm; length 0.28-0.36 m;
 - elbow: olecranon ~4-5 cm wide, protruding 10-15 mm behind the bone axes; flexion 60-120 deg;
 - shoulder: deltoid cap 10-14 cm deep and wide (bideltoid breadth 41-52 cm minus chest);
-- chest breadth 27-38 cm, chest depth 21-30 cm; back: the same trunk with the shoulder blades
+- chest breadth 27-38 cm (broader than ANSUR II's 24-32 cm), chest depth 21-30 cm; back: the
+  same trunk with the shoulder blades
   (scapulae ~10 x 15 cm, 1-2 cm proud of the ribs);
 - knee: patella ~4.5-5.5 cm wide, femoral condyles 8.5-10.5 cm across, thigh circumference
   45-65 cm, calf 31-41 cm; flexion 60-110 deg;

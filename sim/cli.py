@@ -1,6 +1,7 @@
-"""`handskin part`, `probe`, `assets`, `generate`, `merge`: parts, calibration, MJCF, datasets.
+"""`handskin part`, `probe`, `assets`: sensorized parts, their calibration and MJCF assets.
 
-`register(app)` adds the commands to the project's typer app (wired in handskin/cli.py).
+`register(app)` adds them, and `generate` and `merge` (`sim.generate_cli`), to the project's typer
+app (wired in handskin/cli.py).
 """
 
 from __future__ import annotations
@@ -11,7 +12,13 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from tactile.errors import HandskinError
+from assets import ASSETS_DIR
+from sim.generate_cli import register as register_generate
+from tactile.errors import ConfigError, HandskinError, require_positive
+from tactile.tactile_map import TactileMap
+
+# The sim modules load trimesh, MuJoCo or pyvista (0.5-2 s): they are imported inside the
+# commands that need them, so that `handskin --help` stays quick.
 
 # label: (shape, size_m). The R10 sphere's depth stays within the 2 mm layer up to 12.6 N.
 PROBE_SET = {  # sized for the default skin's 10.6 mm pad pitch (taxel area ~110 mm²)
@@ -22,7 +29,8 @@ PROBE_SET = {  # sized for the default skin's 10.6 mm pad pitch (taxel area ~110
 
 
 def _fail(err: Exception) -> typer.Exit:
-    typer.echo(f"error: {err}", err=True)
+    text = err.args[0] if isinstance(err, KeyError) and err.args else err  # no repr quotes
+    typer.echo(f"error: {text}", err=True)
     return typer.Exit(2)
 
 
@@ -30,7 +38,8 @@ def part_command(
     name: Annotated[
         str,
         typer.Argument(
-            help="Part name: forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector or plate."
+            metavar="NAME",
+            help="Part name: forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector or plate.",
         ),
     ] = "forearm",
     mesh: Annotated[
@@ -46,8 +55,9 @@ def part_command(
     map_png: Annotated[
         Path | None, typer.Option(help="Write the flat tactile map picture (PNG, mm axes).")
     ] = None,
-    mjcf_out: Annotated[
-        Path | None, typer.Option(help="Write MJCF + STL + layout under this folder.")
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Write the part's MJCF, link STL and taxel layout under this folder."),
     ] = None,
     step_mm: Annotated[float, typer.Option(help="Tactile map grid step, mm/pixel.")] = 1.0,
     views: Annotated[
@@ -59,10 +69,10 @@ def part_command(
     ] = "+x,-x",
 ) -> None:
     """Build a sensorized part; print taxel count, link extents (m) and map size (mm)."""
-    from sim.parts import W0_REGION, W0_TILING, custom_part, get_part
-    from tactile.tactile_map import TactileMap
+    from sim.parts import W0_REGION, W0_TILING, custom_part, get_part  # start-up: trimesh
 
     try:
+        require_positive("--step-mm", step_mm, "mm/pixel")
         part = custom_part(mesh, W0_REGION, W0_TILING, name) if mesh else get_part(name)
         tmap = TactileMap.build(part.layout, step_mm=step_mm)
     except (HandskinError, KeyError) as err:
@@ -74,17 +84,17 @@ def part_command(
         f"modules; link extents {ext} m; map {h * step_mm:.0f} x {w * step_mm:.0f} mm"
     )
     if png:
-        from sim.pictures import save_part_picture
+        from sim.pictures import save_part_picture  # start-up: pyvista
 
         typer.echo(f"picture: {save_part_picture(part, png, tuple(views.split(',')))}")
     if map_png:
-        from tactile.plot import save_map_picture
+        from tactile.plot import save_map_picture  # start-up: matplotlib
 
         typer.echo(f"map picture: {save_map_picture(tmap, map_png, title=part.name)}")
-    if mjcf_out:
-        from sim.mjcf import write_part
+    if out:
+        from sim.mjcf import write_part  # start-up: mujoco
 
-        for kind, path in write_part(part, mjcf_out).items():
+        for kind, path in write_part(part, out).items():
             typer.echo(f"{kind}: {path}")
 
 
@@ -96,12 +106,15 @@ def probe_command(
     seed: Annotated[int, typer.Option(help="Seed of the per-taxel gains and baselines.")] = 0,
 ) -> None:
     """Force sweep with sphere and flat indenters: summed reading (counts) and active taxels."""
-    from sim.parts import get_part
-    from sim.probe import Probe, calibration_curve, central_taxel
+    from sim.parts import get_part  # start-up: trimesh
+    from sim.probe import Probe, calibration_curve, central_taxel  # start-up: mujoco
 
     try:
+        require_positive("--max-force", max_force, "N")
+        if n_forces < 2:
+            raise ConfigError(f"--n-forces {n_forces} is out of range; allowed >= 2")
         p = get_part(part)
-    except KeyError as err:
+    except (HandskinError, KeyError) as err:
         raise _fail(err) from err
     forces = np.linspace(0.0, max_force, n_forces)
     curves = {
@@ -116,8 +129,8 @@ def probe_command(
             f"{_first(forces, c['saturated'] > 0)} N, depth error <= {err:.3f} mm"
         )
     if png:
-        from sim.pictures import calibration_figure
-        from sim.skin import SkinConfig
+        from sim.pictures import calibration_figure  # start-up: pyvista, matplotlib
+        from sim.skin import SkinConfig  # start-up: trimesh
 
         cfg = SkinConfig()
         title = (
@@ -139,169 +152,12 @@ def assets_command(
     ] = None,
 ) -> None:
     """Regenerate the MJCF assets of every built-in part (see assets/README.md)."""
-    from assets import ASSETS_DIR
-    from sim.mjcf import write_part
-    from sim.parts import PARTS, get_part
+    from sim.mjcf import write_part  # start-up: mujoco
+    from sim.parts import PARTS, get_part  # start-up: trimesh
 
     for name in PARTS:
         for kind, path in write_part(get_part(name), out or ASSETS_DIR).items():
             typer.echo(f"{name} {kind}: {path}")
-
-
-def generate_command(
-    out: Annotated[
-        Path,
-        typer.Option(
-            help="Dataset folder (path): new, empty, or a run of the same configuration to resume."
-        ),
-    ],
-    part: Annotated[
-        str | None,
-        typer.Option(
-            help="Part: forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector, plate, or a "
-            "link mesh file .stl/.obj (metres). "
-            "Default: forearm."
-        ),
-    ] = None,
-    n: Annotated[
-        int | None,
-        typer.Option("--n", help="Number of samples (count). Default: 3530 as in the paper."),
-    ] = None,
-    hand_fraction: Annotated[
-        float | None,
-        typer.Option(help="Fraction of hand samples (unitless, 0..1). Default: 1710/3530."),
-    ] = None,
-    seed: Annotated[
-        int | None,
-        typer.Option(
-            help="Dataset seed (integer >= 0); sample i depends only on (seed, i). Default: 0."
-        ),
-    ] = None,
-    split: Annotated[
-        str | None,
-        typer.Option(
-            help="Train/test split: greedy (70/30 by samples; default) or keyed (each subject's "
-            "and object instance's side fixed by the seed and its id, so datasets of one seed "
-            "on any part, of any size, hold out the same people; fractions within a few "
-            "points of 70/30)."
-        ),
-    ] = None,
-    workers: Annotated[
-        int | None,
-        typer.Option(
-            help="Worker processes or Ray actors (count). Default: all cores. Never changes "
-            "the bytes."
-        ),
-    ] = None,
-    config: Annotated[
-        Path | None,
-        typer.Option(
-            help="TOML file of GenerateConfig (docs/generate.md): scene, subjects, skin, "
-            "randomization; command-line options override it."
-        ),
-    ] = None,
-    keep_sequences: Annotated[
-        bool | None,
-        typer.Option(
-            "--keep-sequences/--no-keep-sequences",
-            help="Also store each episode's 10 Hz raw sequence (frames x taxels, counts).",
-        ),
-    ] = None,
-    chunk_size: Annotated[
-        int | None,
-        typer.Option(
-            help="Samples per chunk (count): the unit of atomic writes and resume. Default: 32."
-        ),
-    ] = None,
-    shard: Annotated[
-        str,
-        typer.Option(
-            help="i/n: compute only chunks k with k mod n = i (unitless indices); merge the shard "
-            "folders with `handskin merge`."
-        ),
-    ] = "0/1",
-    ray: Annotated[
-        str | None,
-        typer.Option(
-            help="Run on Ray: 'local' (start a local instance), 'auto' or an address "
-            "(needs the ray extra)."
-        ),
-    ] = None,
-    print_config: Annotated[
-        bool,
-        typer.Option(help="Print the resolved configuration (TOML) and exit without generating."),
-    ] = False,
-    quiet: Annotated[bool, typer.Option(help="No progress bar.")] = False,
-) -> None:
-    """Generate (or resume) a labelled synthetic tactile dataset (same bytes for any --workers)."""
-    from sim.gen_config import load_generate_config
-    from sim.generate import generate, parse_shard
-    from tactile.config import to_toml
-
-    try:
-        cfg = load_generate_config(
-            config,
-            part=part,
-            n=n,
-            hand_fraction=hand_fraction,
-            seed=seed,
-            split=split,
-            keep_sequences=keep_sequences,
-            chunk_size=chunk_size,
-        )
-        if print_config:
-            typer.echo(to_toml(cfg), nl=False)
-            return
-        report = generate(
-            cfg, out, workers=workers, shard=parse_shard(shard), ray=ray, progress=not quiet
-        )
-    except HandskinError as err:
-        raise _fail(err) from err
-    typer.echo(
-        f"{report.n_computed} samples computed in {report.wall_s:.1f} s "
-        f"({report.samples_per_s:.1f} samples/s); {report.n_samples} on disk; rejected episodes: "
-        f"{report.rejects or 'none'}"
-    )
-    typer.echo(
-        f"dataset: {report.dataset}"
-        if report.dataset
-        else f"shard {shard} written to {out}; merge the shards with `handskin merge`"
-    )
-    if report.dataset:
-        typer.echo(split_line(report.dataset))
-
-
-def split_line(dataset: Path) -> str:
-    """One line on a merged dataset's train/test split: method, samples and held-out groups."""
-    from tactile.dataset import open_dataset
-
-    with open_dataset(dataset) as ds:
-        test = ds.splits["test"]
-        groups = [
-            len(set(ds[f][()][test].tolist()) - {-1}) if f in ds.fields else 0
-            for f in ("subject_id", "instance_id")
-        ]
-        method = ds.attrs.get("split_method", "greedy")
-        n = len(ds)
-    return (
-        f"split ({method}): {n - len(test)} train / {len(test)} test samples "
-        f"({100 * (n - len(test)) / max(n, 1):.1f} % train); held out: {groups[0]} subjects, "
-        f"{groups[1]} object / body-part instances"
-    )
-
-
-def merge_command(
-    shards: Annotated[list[Path], typer.Argument(help="Shard folders of one configuration.")],
-    out: Annotated[Path, typer.Option(help="Output dataset folder (new, empty, or a shard).")],
-) -> None:
-    """Merge dataset shards (`generate --shard i/n`) into one dataset, equal to a single run."""
-    from sim.generate import merge_shards
-
-    try:
-        path = merge_shards(shards, out)
-    except HandskinError as err:
-        raise _fail(err) from err
-    typer.echo(f"dataset: {path}")
 
 
 def register(app: typer.Typer) -> None:
@@ -309,5 +165,4 @@ def register(app: typer.Typer) -> None:
     app.command("part")(part_command)
     app.command("probe")(probe_command)
     app.command("assets")(assets_command)
-    app.command("generate")(generate_command)
-    app.command("merge")(merge_command)
+    register_generate(app)

@@ -110,12 +110,6 @@ def _normal_forces_n(model: mujoco.MjModel, data: mujoco.MjData, idx: np.ndarray
     return normal
 
 
-def contact_force_n(scene: PressScene) -> float:
-    """Sum of the normal forces (N) of the contacts between the link and anything else."""
-    m, d = scene.model, scene.data
-    return contact_forces_n(m, d, scene.readout.link_body, np.zeros((0, 3)), 0.0)[0]
-
-
 def read_frame(scene: PressScene, skin: SkinInstance, active_pa: float, time_s: float) -> Frame:
     """The frame of the current state (call after `mj_forward` with sensors enabled)."""
     m, d = scene.model, scene.data

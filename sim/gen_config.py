@@ -14,12 +14,17 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from handskin import __version__
 from sim.episode import EpisodeConfig
+from sim.hand import HAND_DETAILS
+from sim.parts import PARTS
 from tactile.config import from_dict, load_config, override
+from tactile.dataset.manifest import MANIFEST, read_manifest
+from tactile.dataset.splits import METHODS
 from tactile.errors import ConfigError, DataError
 
 PAPER_SAMPLES = 3530  # Albini & Cannata, IJRR 2020: 1,710 hand + 1,820 non-hand contacts
@@ -58,7 +63,7 @@ class GenerateConfig:
     part: str = "forearm"
     n: int = PAPER_SAMPLES  # samples in the dataset (3,530 as in the paper)
     # Fraction of hand samples, unitless; 1710/3530 as in the paper. Sample i's class is fixed by
-    # `sim.generate.is_hand_index` (exact over every prefix, independent of n).
+    # `sim.sampler.is_hand_index` (exact over every prefix, independent of n).
     hand_fraction: float = PAPER_HAND_FRACTION
     seed: int = 0  # dataset seed: sample i draws from SeedSequence(seed, spawn_key=(i, attempt))
     # Samples per chunk (the unit of atomic writing, resuming and parallel work); 32 keeps a
@@ -90,9 +95,6 @@ class GenerateConfig:
         for name, (lo, hi) in RANGES.items():
             check_range(name, _get(self, name), lo, hi)
         check_part(self.part)
-        from sim.hand import HAND_DETAILS
-        from tactile.dataset.splits import METHODS
-
         if self.split not in METHODS:
             raise ConfigError(f"split = {self.split!r} unknown; choose one of {', '.join(METHODS)}")
         if self.hand_detail not in HAND_DETAILS:
@@ -154,8 +156,6 @@ def is_mesh_path(part: str) -> bool:
 
 def check_part(part: str) -> None:
     """ConfigError unless ``part`` is a built-in part or an existing .stl/.obj file."""
-    from sim.parts import PARTS
-
     if part in PARTS:
         return
     if is_mesh_path(part):
@@ -180,27 +180,9 @@ def load_generate_config(path: str | Path | None = None, **changes: Any) -> Gene
     return override(cfg, table) if table else cfg
 
 
-def field_docs() -> list[tuple[str, str]]:
-    """(dotted name, default) of every leaf field, for the reference in docs/generate.md."""
-    out: list[tuple[str, str]] = []
-
-    def walk(obj: Any, prefix: str) -> None:
-        for f in fields(obj):
-            value = getattr(obj, f.name)
-            if hasattr(value, "__dataclass_fields__"):
-                walk(value, f"{prefix}{f.name}.")
-            else:
-                out.append((prefix + f.name, repr(value)))
-
-    walk(GenerateConfig(), "")
-    return out
-
-
 def generator_version() -> str:
     """``<handskin version>+src.<sha256 prefix of sim/ and tactile/ sources>``: in the
     fingerprint, so a folder started by other code is refused instead of mixed."""
-    from handskin import __version__
-
     root = Path(__file__).resolve().parent.parent
     digest = hashlib.sha256()
     for path in sorted([*root.glob("sim/**/*.py"), *root.glob("tactile/**/*.py")]):
@@ -210,8 +192,6 @@ def generator_version() -> str:
 
 def refuse_other_code(out: Path, manifest: dict) -> None:
     """DataError when ``out`` was started with the same configuration but other generator code."""
-    from tactile.dataset.manifest import MANIFEST, read_manifest
-
     if not (out / MANIFEST).is_file():
         return
     old = read_manifest(out)

@@ -37,11 +37,10 @@ segment to what a contact must look like, and measured: the pulp's allowance (1.
 fingertip pressed with 2-5 N on MuJoCo's tactile plate sink 2.5-3 mm and touch 11-14 mm across
 for hands of 15-22 cm (the chord of its capsule end; a pressed finger pad touches about 10-15 mm
 across; tests/sim/test_hand.py); the phalanx pads (5 x) flatten across the finger's width, so a
-finger lying on the link prints a stripe; the palm takes 2.75 x. Measured
-(320 forearm samples, seed 2020, forces of `sim.interactions`, fingers spread): median 40 active
-taxels per hand contact (quartiles 30 / 56), palm 0.52 of hand pixels (paper ~0.40), >= 3 fingers
-in 85 % of grasps (before the spread: 42, 30 / 55, 0.51, 88 %). History: one 3.5 mm allowance
-everywhere gave a median of 16 active taxels.
+finger lying on the link prints a stripe; the palm takes 2.75 x. On the default forearm (320
+samples, seed 2020, forces of `sim.interactions`) a hand contact lights a median of 40 taxels
+(quartiles 30 / 56), the palm holds 0.52 of the hand pixels (the paper: about 0.40) and 85 % of
+grasps show >= 3 fingers; a single 3.5 mm allowance on every segment would light a median of 16.
 
 Labels. Collision geoms are named ``<prefix><part>_<segment>`` with part in `HAND_PARTS`
 (the thenar eminence on the first metacarpal is "palm"); `geom_parts` / `geom_part_ids` recover
@@ -97,7 +96,7 @@ PART_RGBA = {  # after the palette of Albini & Cannata 2020, Fig. 10
 }
 # Soft-tissue allowance (solimp width) per segment, as a multiple of the subject's softness scale
 # `HandConfig.tissue_depth_m` (3.5 mm mean): palm 9.6 mm, phalanx pads 17.5 mm, fingertip pulp
-# 4.4 mm at the mean (module docstring, "Soft tissue"; measured effect in test_hand_statistics).
+# 4.4 mm at the mean (module docstring, "Soft tissue").
 TISSUE_RATIO = {"palm": 2.75, "proximal": 5.0, "middle": 5.0, "distal": 1.25}
 _PART_RE = re.compile(r"(?:^|_)[rl]h_(thumb|index|middle|ring|pinkie|palm)_")
 

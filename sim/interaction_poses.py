@@ -13,8 +13,8 @@ Modes (Albini & Cannata 2020, Fig. 6: whole hands, fingertips only, different pr
 - ``palm``: fingers lifted; ``curled``: loose fist, knuckles and palm.
 
 Every mode fans the fingers by the subject's habitual spread (`finger_spread`; held from before
-the hand lands, `sim.contactors.PressPlan.preshape`). Before the spread, the abduction joints
-had no target and no noise: every hand pressed with its four fingers parallel and touching.
+the hand lands, `sim.contactors.PressPlan.preshape`), so that fingers do not press parallel and
+touching.
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ TIPS_PITCH_DEG = (20.0, 35.0)  # wrist pitch of fingertip touches (fingertips do
 FREE_VARIANTS = ("flat", "fingertips", "palm", "curled", "wrap")
 FREE_PROBS = (0.3, 0.35, 0.05, 0.1, 0.2)  # fingertip touches are common in Fig. 6
 # Palm cupping of a grasp: the 4th/5th CMC joints flex 10-15 / 20-30 deg (`sim.hand`); a power
-# grasp uses most of it (was 10: median active taxels 38 -> 39, palm share 0.53, measured).
+# grasp uses most of it.
 GRASP_ARCH_DEG = 20.0
 # Finger fan: MCP abduction of each finger away from the middle one, in units of the spread.
 FAN = {"index": 1.0, "middle": 0.0, "ring": 1.0, "pinkie": 2.0}

@@ -26,8 +26,8 @@ handle are several tens of newtons (ergonomics tables, e.g. Snook & Ciriello), p
 to hold an object are 20-50 N (a fraction of the 300-500 N maximal grip), and ISO/TS 15066
 puts the quasi-static limit for the hand at 140 N; gentle and social touches are a few newtons
 (the free range's low end). Shear is 25-60 % of the normal force (below the friction of skin,
-mu ~ 0.8), twist 0.2-0.8 N m. (Measured: the forces 8-25 / 5-20 / 2-15 N used before gave a
-median of 38 active taxels per contact with the present tissue, these 43.) Finger torques are
+mu ~ 0.8), twist 0.2-0.8 N m. (Lower ranges, 8-25 / 5-20 / 2-15 N, light a median of 38 active
+taxels per contact instead of these ranges' 43.) Finger torques are
 the hand's joint actuators (torque-limited): targets beyond the link make fingers close until
 they meet it.
 

@@ -18,17 +18,11 @@ Instances: each kind has a pool of ``instances_per_kind`` instances (default 20)
 ids `instance_id_for` (unique across kinds), so a dataset split by instance id holds object and
 body-part instances in the test set that training never saw. The press mode is recorded in the
 description (``description["press"]``) so it reaches the dataset's contactor JSON.
-
-``python -m sim.nonhand`` presses every type through the episode runner and writes the contact
-sheets ``docs/sheet_objects.png`` and ``docs/sheet_body_parts.png``.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
@@ -97,63 +91,18 @@ def sample_nonhand(
     p = np.array([table[k] for k in keys])
     kind, name = keys[int(rng.choice(len(keys), p=p / p.sum()))]
     iid = instance_id_for(kind, name, int(rng.integers(instances_per_kind)))
+    return pressed_instance(kind, name, iid, rng)
+
+
+def pressed_instance(
+    kind: str, name: str, instance_id: int, rng: np.random.Generator
+) -> tuple[ContactorSpec, PressPlan]:
+    """Instance ``instance_id`` of type ``name`` ("object" or "body" ``kind``) and a press drawn
+    from ``rng``; the press mode is recorded in the description as "press"."""
     if kind == "object":
-        spec = build_object(name, rng, iid)
+        spec = build_object(name, rng, instance_id)
         mode, plan = object_press(spec, rng)
     else:
-        spec = build_body_part(name, rng, iid)
+        spec = build_body_part(name, rng, instance_id)
         mode, plan = body_press(spec, rng)
     return replace(spec, description=spec.description | {"press": mode}), plan
-
-
-def type_maker(kind: str, name: str, instances_per_kind: int = 20):
-    """``make(rng) -> (ContactorSpec, PressPlan)`` for `sim.episode.run_sample`: one type only."""
-
-    def make(rng: np.random.Generator) -> tuple[ContactorSpec, PressPlan]:
-        iid = instance_id_for(kind, name, int(rng.integers(instances_per_kind)))
-        build, press = (
-            (build_object, object_press) if kind == "object" else (build_body_part, body_press)
-        )
-        spec = build(name, rng, iid)
-        mode, plan = press(spec, rng)
-        return replace(spec, description=spec.description | {"press": mode}), plan
-
-    return make
-
-
-def write_sheet(path: Path, kind: str, n_per_type: int = 3, seed: int = 0) -> Path:
-    """Contact sheet of ``n_per_type`` pressed samples of every object (or body-part) type."""
-    from sim.episode import EpisodeContext, run_sample
-    from tactile.sheet import save_contact_sheet
-
-    ctx, names = EpisodeContext(), OBJECT_KINDS if kind == "object" else BODY_KINDS
-    images, titles = [], []
-    for k, name in enumerate(names):
-        for i in range(n_per_type):
-            sample, _ = run_sample(k * n_per_type + i, seed, ctx, type_maker(kind, name))
-            desc = json.loads(sample["contactor"])
-            images.append(sample["image"])
-            titles.append(f"{name} {desc['press']} {float(sample['force_n']):.0f} N")
-    what = "objects" if kind == "object" else "body parts"
-    return save_contact_sheet(
-        path,
-        np.stack(images),
-        titles=titles,
-        n_cols=2 * n_per_type,
-        title=f"simulated {what} pressed on the forearm",
-        tile_in=1.9,
-    )
-
-
-def main() -> None:
-    parser = argparse.ArgumentParser(description="contact sheets of the non-hand contactors")
-    parser.add_argument("--out", type=Path, default=Path("docs"))
-    parser.add_argument("--per-type", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args()
-    for kind, file in (("object", "sheet_objects.png"), ("body", "sheet_body_parts.png")):
-        print(write_sheet(args.out / file, kind, args.per_type, args.seed))
-
-
-if __name__ == "__main__":
-    main()

@@ -51,15 +51,16 @@ from sim.primitives import (
 from tactile.errors import ConfigError
 
 # --- builders: rng -> (primitives, dimensions in m, fill fraction) --------------------------
-# Sizes: everyday objects (golf ball r 21 mm .. football r 110 mm; mugs 70-96 mm across; tools
-# after common hand-tool dimensions); each range is in the builder.
+# Sizes: everyday objects (balls from a table-tennis ball, r 20 mm (ITTF: 40 mm across), to a
+# football, r 110 mm (IFAB Law 2: 68-70 cm round); mugs 70-96 mm across; tools after common
+# hand-tool dimensions); each range is in the builder.
 
 Built = tuple[list[Prim], dict, float]
 _HARD, _SOFT = ("steel", "aluminium", "wood", "hard_plastic"), ("rubber", "foam")
 
 
 def _ball(rng: np.random.Generator) -> Built:
-    r = unif(rng, 0.02, 0.11, log=True)  # golf ball .. football
+    r = unif(rng, 0.02, 0.11, log=True)  # table-tennis ball .. football
     mat = pick(rng, ("rubber", "foam", "hard_plastic") + (("steel", "wood") if r < 0.04 else ()))
     fill = 1.0 if mat in ("steel", "wood", "foam") else 0.15  # hollow balls
     return [prim("ball", "sphere", (r,), material=mat)], _dims(radius=r), fill

@@ -1,7 +1,7 @@
 """Pictures of parts and probe calibrations (off-screen: pyvista for 3D, matplotlib Figure API).
 
-pyvista renders with VTK off-screen; on this machine VTK's X-less OpenGL path worked without Xvfb
-(it logs "bad X server connection" and renders anyway).
+pyvista renders with VTK off-screen; without a display VTK may log "bad X server connection" and
+still render (set-up without a display: docs/viewing.md).
 """
 
 from __future__ import annotations
@@ -9,14 +9,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pyvista as pv
 from matplotlib.figure import Figure
 
 from sim.parts import Part
 
 
-def _poly(vertices: np.ndarray, faces: np.ndarray):
-    import pyvista as pv
-
+def polydata(vertices: np.ndarray, faces: np.ndarray) -> pv.PolyData:
+    """A pyvista triangle mesh: vertices (V, 3) float, m; faces (M, 3) int."""
     return pv.PolyData(vertices, np.column_stack([np.full(len(faces), 3), faces]).ravel())
 
 
@@ -33,8 +33,6 @@ def save_part_picture(
 
     The sensor mesh and taxels are drawn 1.5–2 mm out along the normals so that chords across
     rounded edges stay visible."""
-    import pyvista as pv
-
     pv.OFF_SCREEN = True
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -43,13 +41,13 @@ def save_part_picture(
     for i, view in enumerate(views):
         plotter.subplot(0, i)
         plotter.add_mesh(
-            _poly(part.link.vertices, part.link.faces),
+            polydata(part.link.vertices, part.link.faces),
             color="#d9d9de",
             smooth_shading=True,
             ambient=0.3,
         )
         plotter.add_mesh(
-            _poly(pos + 1.5e-3 * normals, part.sensor_faces),
+            polydata(pos + 1.5e-3 * normals, part.sensor_faces),
             color="#a9c4ee",
             show_edges=True,
             edge_color="#35598f",

@@ -18,6 +18,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from sim.parts import Part
 
@@ -31,8 +32,6 @@ SURFACE_EDGE_M = 0.004  # longest edge of the subdivided link mesh used for surf
 @lru_cache(maxsize=8)
 def coverage(part: Part) -> np.ndarray:
     """(N,) float: taxels within `AIM_RADIUS_MM` of each taxel on the flat lattice (incl. it)."""
-    from scipy.spatial import cKDTree
-
     tree = cKDTree(part.flat_mm)
     return np.array([len(n) for n in tree.query_ball_point(part.flat_mm, AIM_RADIUS_MM)], float)
 
@@ -69,8 +68,6 @@ def lattice_jacobian(part: Part, taxel: int) -> np.ndarray:
 def _vertex_tree(part: Part):
     """KD-tree over the link mesh subdivided to `SURFACE_EDGE_M` edges, and its vertex normals
     (a coarse mesh, e.g. a box's 8 corners, would give corner normals on a face)."""
-    from scipy.spatial import cKDTree
-
     dense = part.link.subdivide_to_size(SURFACE_EDGE_M)
     return cKDTree(np.asarray(dense.vertices)), np.asarray(dense.vertex_normals)
 

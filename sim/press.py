@@ -15,8 +15,8 @@ servo: the force ramps with the target, then saturates); hold = the shear slides
 hinge pull towards far targets capped at the plan's shear and twist; release = back up.
 Contactor joints (fingers) stay at 0 during the approach and go to their plan targets during the
 load, torque-limited by the contactor's own actuators: a hand's palm lands first, then the
-fingers close (closing during the approach, curled fingers met the link before the palm and
-propped it up: measured). A hand's wrist (tilt hinges) is stiffer than an object's
+fingers close (fingers closing during the approach would meet the link before the palm and prop
+it up). A hand's wrist (tilt hinges) is stiffer than an object's
 (`HAND_TILT_KP`), so closing fingers cannot roll the palm off the face.
 """
 

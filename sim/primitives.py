@@ -54,7 +54,7 @@ SOLREF = (0.01, 1.0)  # s, damping ratio: the hand's; >= 2 time steps up to dt =
 # (rulers, plates) reach 2.3 x (measured): allow 3 x when there is a box.
 PENETRATION_FACTOR, BOX_PENETRATION_FACTOR = 2.0, 3.0
 FINGER_RADIUS_M = (0.006, 0.011)  # hand phalanx radii, sim.hand_kinematics
-FINGER_SPACING_M = (0.015, 0.025)  # finger centre spacing (MCP pitch), brief and sim.hand
+FINGER_SPACING_M = (0.015, 0.025)  # finger centre spacing (MCP pitch), sim.hand_kinematics
 PREFIX = "obj_"
 
 
@@ -124,11 +124,6 @@ def support_point(p: Prim) -> np.ndarray:
     else:
         local = s[:3] ** 2 * u / np.linalg.norm(s[:3] * u)
     return p.pos + p.mat @ local
-
-
-def lowest_z_m(prims: list[Prim]) -> float:
-    """Height (m) of the lowest point of the primitives."""
-    return min(float(support_point(p)[2]) for p in prims)
 
 
 def anchor_m(prims: list[Prim], band_m: float = 0.001) -> np.ndarray:

@@ -10,9 +10,12 @@ with seeds from ``(seed, i, attempt)`` only, so the bytes never depend on which 
 
 from __future__ import annotations
 
+import ctypes
 import os
+import signal
 from collections import Counter
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -22,7 +25,7 @@ from sim.gen_config import GenerateConfig, is_mesh_path
 from sim.generate_hands import hand_maker
 from sim.hand import HandConfig
 from sim.nonhand import sample_nonhand
-from sim.parts import Part, get_part
+from sim.parts import W0_REGION, W0_TILING, Part, custom_part, get_part
 from sim.subjects import Subject, sample_subjects
 from tactile.errors import ConfigError
 
@@ -46,14 +49,19 @@ class WorkerState:
 _STATE: WorkerState | None = None
 
 
+def is_hand_index(i: int, hand_fraction: float) -> bool:
+    """Whether sample ``i`` is a hand contact: a Bresenham sequence, exact over every prefix.
+
+    Over samples 0..n-1 exactly ``floor(n · hand_fraction)`` are hands, evenly interleaved, and
+    the answer for ``i`` does not depend on ``n`` (so a dataset can be extended or sharded).
+    """
+    return int(np.floor((i + 1) * hand_fraction)) - int(np.floor(i * hand_fraction)) == 1
+
+
 def build_part(cfg: GenerateConfig) -> Part:
     """The configured part: a built-in one, or a link mesh covered like Baxter W0."""
     if not is_mesh_path(cfg.part):
         return get_part(cfg.part)
-    from pathlib import Path
-
-    from sim.parts import W0_REGION, W0_TILING, custom_part
-
     return custom_part(cfg.part, W0_REGION, W0_TILING, Path(cfg.part).stem)
 
 
@@ -113,8 +121,6 @@ def pad_sequence(sample: Sample, frames: int) -> Sample:
 
 def sample_at(i: int, state: WorkerState) -> tuple[Sample, Counter]:
     """Sample ``i`` of the dataset and its reject counts by reason."""
-    from sim.generate import is_hand_index
-
     cfg = state.cfg
     make = state.hand if is_hand_index(i, cfg.hand_fraction) else state.nonhand
     sample, rejects = run_sample(i, cfg.seed, state.ctx, make, cfg.keep_sequences)
@@ -143,12 +149,10 @@ def release_free_memory() -> None:
     """Return freed heap pages to the OS (glibc ``malloc_trim``; no-op elsewhere).
 
     Every episode compiles MuJoCo scenes (contactor specs, models); the freed blocks stay in
-    glibc's arenas, fragmented, and a worker's RSS crept up by ~50 KB per sample over 10,000
-    samples. Trimming after each chunk keeps it flat (measured: 643 -> 303 MB after 350 hands).
+    glibc's arenas, fragmented, and without trimming a worker's memory grows by about 50 KB per
+    sample. Trimming after each chunk keeps it flat.
     """
     try:
-        import ctypes
-
         ctypes.CDLL("libc.so.6").malloc_trim(0)
     except (OSError, AttributeError):
         pass
@@ -158,9 +162,6 @@ def pool_worker_init(cfg: GenerateConfig, parent_pid: int) -> None:
     """Pool worker start: die with the parent (a SIGKILLed parent leaves no orphans blocked on
     the task queue; Linux prctl PR_SET_PDEATHSIG), then build the worker state."""
     try:
-        import ctypes
-        import signal
-
         pr_set_pdeathsig = 1
         ctypes.CDLL("libc.so.6", use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGKILL))
     except (OSError, AttributeError):  # not Linux: orphans end when the queue breaks

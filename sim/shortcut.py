@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from os import PathLike
 
+import h5py
 import numpy as np
 from skimage.measure import label
 from sklearn.linear_model import LogisticRegression
@@ -122,8 +123,6 @@ def shortcut_check(
 def load_arrays(path: str | PathLike[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(images (S, H, W) uint8, is_hand (S,), groups (S,)) from a dataset.h5 (schema of
     docs/DESIGN.md)."""
-    import h5py
-
     with h5py.File(path, "r") as f:
         s = f["samples"]
         images, hand = s["image"][...], s["is_hand"][...]

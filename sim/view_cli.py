@@ -2,7 +2,9 @@
 
 The sample comes from a dataset (``DATASET --sample I``: a synthetic dataset is re-simulated from
 its stored configuration to place the contactor, a real one is drawn without it) or is simulated
-now (``--seed S --index I``). `register(app)` adds the command (wired in handskin/cli.py).
+now (``--part P --seed S --sample I``). `register(app)` adds the command (wired in
+handskin/cli.py). MuJoCo, pyvista and matplotlib are imported inside the functions that use them,
+so that `handskin --help` stays quick.
 """
 
 from __future__ import annotations
@@ -13,14 +15,19 @@ from typing import Annotated
 
 import numpy as np
 import typer
+from PIL import Image
 
-from tactile.errors import ConfigError, DataError, HandskinError
+from tactile.config import from_dict
+from tactile.dataset.reader import open_dataset
+from tactile.errors import ConfigError, DataError, HandskinError, require_positive
+from tactile.labels import backproject, check_labels
 
-COLORS = ("pressure", "label", "prediction")  # as sim.view.COLORS (not imported: keeps --help fast)
+COLORS = ("pressure", "label", "prediction")  # sim.render.COLORS, which loads pyvista
 
 
 def _fail(err: Exception) -> typer.Exit:
-    typer.echo(f"error: {err}", err=True)
+    text = err.args[0] if isinstance(err, KeyError) and err.args else err  # no repr quotes
+    typer.echo(f"error: {text}", err=True)
     return typer.Exit(2)
 
 
@@ -31,26 +38,24 @@ def has_display() -> bool:
 
 def load_predicted(path: Path, tmap, n_taxels: int) -> tuple[np.ndarray, np.ndarray | None]:
     """(per-taxel classes (N,), pixel segmentation (H, W) or None) from a .npy of (N,) taxel
-    labels (as ``handskin predict --save-labels`` writes) or of an (H, W) segmentation
-    (back-projected with `tactile.labels.backproject`)."""
-    from tactile.labels import backproject, check_labels
-
+    labels (as ``handskin predict DATASET --sample I --out FILE.npy`` writes) or of an (H, W)
+    segmentation (back-projected with `tactile.labels.backproject`)."""
     path = Path(path)
     if not path.is_file():
         raise DataError(
-            f"no predicted labels at {path}. Fix: write them with handskin predict "
-            "--data DATASET --index I --segmenter CKPT --save-labels FILE.npy"
+            f"--pred {path}: no such file. Fix: write the labels with handskin predict "
+            "DATASET --sample I --segmenter CKPT --out FILE.npy"
         )
     try:
         arr = np.load(path, allow_pickle=False)
     except (OSError, ValueError) as err:
-        raise DataError(f"{path}: not a .npy array of class ids ({err})") from err
+        raise DataError(f"--pred {path}: not a .npy array of class ids ({err})") from err
     if arr.shape == tmap.shape:
         return backproject(tmap, arr.astype(np.int64)).astype(np.int64), arr.astype(np.int64)
     if arr.shape == (n_taxels,):
         return check_labels(arr.astype(np.int64), n_taxels), None
     raise DataError(
-        f"{path}: shape {arr.shape}; expected ({n_taxels},) taxel labels or "
+        f"--pred {path}: shape {arr.shape}; expected ({n_taxels},) taxel labels or "
         f"{tmap.shape} pixel classes"
     )
 
@@ -60,25 +65,25 @@ def from_dataset(path: Path, index: int):
 
     A synthetic dataset (attrs ``config``) is re-simulated to place the contactor; a real one
     (or another part) gives no 3D scene."""
-    from tactile.dataset import open_dataset
-    from tactile.figures import common_scale_images
+    from sim.episode import FRAME_DT_S  # start-up: mujoco
+    from tactile.figures import common_scale_images  # start-up: matplotlib
 
     with open_dataset(path) as ds:
         if not 0 <= index < len(ds):
-            raise DataError(f"--sample {index} out of range; the dataset has {len(ds)} samples")
+            n = len(ds)
+            raise DataError(
+                f"--sample {index} out of range; the dataset has {n} samples (0..{n - 1})"
+            )
         sample, tmap, config = ds[index], ds.map, ds.attrs.get("config")
         seq = None
         if "seq_raw" in ds.fields:
-            from sim.episode import FRAME_DT_S
-
             raw = sample["seq_raw"][: int(sample["seq_length"])]
             times_s = (np.arange(len(raw)) + 1) * FRAME_DT_S  # frame k at (k + 1) / 10 Hz
             seq = common_scale_images(tmap, ds.pressure_from_raw(raw, times_s))
     if not isinstance(config, dict):
         return None, tmap, sample, seq
-    from sim.gen_config import GenerateConfig
-    from sim.view import simulate_scene
-    from tactile.config import from_dict
+    from sim.gen_config import GenerateConfig  # start-up: mujoco
+    from sim.view import simulate_scene  # start-up: mujoco
 
     try:
         cfg = from_dict(GenerateConfig, config)
@@ -89,10 +94,12 @@ def from_dataset(path: Path, index: int):
 
 def simulated(part: str, seed: int, index: int, sequence: bool):
     """(ViewScene, tmap, sample dict, sequence images or None) of sample ``index`` simulated now."""
-    from sim.gen_config import GenerateConfig
-    from sim.view import sequence_pressure, simulate_scene
-    from tactile.figures import common_scale_images
+    from sim.gen_config import GenerateConfig  # start-up: mujoco
+    from sim.view import sequence_pressure, simulate_scene  # start-up: mujoco
+    from tactile.figures import common_scale_images  # start-up: matplotlib
 
+    if index < 0:
+        raise ConfigError(f"--sample {index} out of range; allowed >= 0")
     cfg = GenerateConfig(part=part, seed=seed, n=index + 1, keep_sequences=sequence)
     sim = simulate_scene(cfg, index)
     seq = None
@@ -104,14 +111,13 @@ def simulated(part: str, seed: int, index: int, sequence: bool):
 
 def write_outputs(scene, tmap, sample, seq, opts: dict) -> list[Path]:
     """Write the requested PNG / GIF files; returns their paths."""
-    from PIL import Image
-
-    from sim.view import render_scene
-    from tactile.figures import sample_panel, save_figure, save_sequence_gif, sequence_strip
+    import tactile.figures as figures  # start-up: matplotlib
 
     out, view = [], None
     predicted = opts["predicted"]
     if scene is not None and (opts["png"] or opts["panel"] or opts["interactive"]):
+        from sim.render import render_scene  # start-up: pyvista
+
         view = render_scene(
             scene,
             opts["color"],
@@ -131,7 +137,7 @@ def write_outputs(scene, tmap, sample, seq, opts: dict) -> list[Path]:
         out.append(opts["png"])
     if opts["panel"]:
         title = scene.title if scene is not None else ""
-        fig = sample_panel(
+        fig = figures.sample_panel(
             view,
             tmap,
             sample["image"],
@@ -139,7 +145,7 @@ def write_outputs(scene, tmap, sample, seq, opts: dict) -> list[Path]:
             np.asarray(sample["pressure_pa"], dtype=float),
             title,
         )
-        out.append(save_figure(fig, opts["panel"], dpi=90))
+        out.append(figures.save_figure(fig, opts["panel"], dpi=90))
     if opts["prediction_png"]:
         out.extend(
             prediction_outputs(
@@ -155,9 +161,9 @@ def write_outputs(scene, tmap, sample, seq, opts: dict) -> list[Path]:
         if seq is None:
             raise DataError("no 10 Hz sequence for this sample: the dataset has no seq_raw")
         if opts["sequence"].suffix.lower() == ".gif":
-            out.append(save_sequence_gif(opts["sequence"], seq, scale=2))
+            out.append(figures.save_sequence_gif(opts["sequence"], seq, scale=2))
         else:
-            out.append(save_figure(sequence_strip(seq), opts["sequence"]))
+            out.append(figures.save_figure(figures.sequence_strip(seq), opts["sequence"]))
     return out
 
 
@@ -166,7 +172,7 @@ def prediction_outputs(
 ) -> list[Path]:
     """Figs. 12-13 (image, true, predicted, errors) at ``png`` and Fig. 18's per-part bars
     (true vs predicted taxel labels) beside it (``<stem>_parts.png``)."""
-    from tactile.figures import part_bars_figure, prediction_figure, save_figure
+    import tactile.figures as figures  # start-up: matplotlib
 
     if pred_pixels is None:
         raise DataError(
@@ -174,8 +180,10 @@ def prediction_outputs(
             "(N,) taxel labels, handskin predict --png draws these figures"
         )
     pressure = np.asarray(sample["pressure_pa"], dtype=float)
-    fig = prediction_figure(sample["image"], sample["label_image"], pred_pixels, pred_name=name)
-    bars = part_bars_figure(
+    fig = figures.prediction_figure(
+        sample["image"], sample["label_image"], pred_pixels, pred_name=name
+    )
+    bars = figures.part_bars_figure(
         sample["taxel_label"],
         pressure,
         pred_labels=predicted,
@@ -183,8 +191,8 @@ def prediction_outputs(
         title=f"hatched: {name}",
     )
     return [
-        save_figure(fig, png, dpi=90),
-        save_figure(bars, png.with_name(f"{png.stem}_parts.png"), dpi=90),
+        figures.save_figure(fig, png, dpi=90),
+        figures.save_figure(bars, png.with_name(f"{png.stem}_parts.png"), dpi=90),
     ]
 
 
@@ -192,38 +200,37 @@ def view_command(
     dataset: Annotated[
         Path | None,
         typer.Argument(
-            help="Dataset folder (or its dataset.h5); omit to simulate a sample with "
-            "--seed/--index."
+            metavar="DATASET",
+            help="Dataset folder (or its dataset.h5); omit to simulate a sample of --part now.",
         ),
     ] = None,
-    sample: Annotated[int, typer.Option(help="Sample index in DATASET (count, 0-based).")] = 0,
+    sample: Annotated[
+        int,
+        typer.Option(
+            help="Sample index (0-based) in DATASET, or of the simulated dataset (with the "
+            "default hand fraction, samples 2, 4, 6, ... are hands)."
+        ),
+    ] = 0,
     part: Annotated[
         str,
         typer.Option(
-            help="Built-in part for a simulated sample (name: forearm, forearm_8mm, forearm_x2, "
-            "forearm_x4, end_effector, plate; no unit)."
+            help="Part of a simulated sample: forearm, forearm_8mm, forearm_x2, forearm_x4, "
+            "end_effector or plate."
         ),
     ] = "forearm",
-    seed: Annotated[int, typer.Option(help="Dataset seed of the simulated sample (integer).")] = 0,
-    index: Annotated[
-        int,
-        typer.Option(
-            help="Index of the simulated sample (count, 0-based; samples 2, 4, 6, ... are hands "
-            "with the default hand fraction)."
-        ),
-    ] = 2,
+    seed: Annotated[int, typer.Option(help="Dataset seed of a simulated sample.")] = 0,
     color: Annotated[
         str,
         typer.Option(
             help="Taxel colours: pressure (kPa colour bar), label (class palette) or prediction "
-            "(classes read from --pred); no unit."
+            "(classes read from --pred)."
         ),
     ] = "pressure",
     pred: Annotated[
         Path | None,
         typer.Option(
             help="Predicted classes for --color prediction: .npy of (N,) taxel class ids or an "
-            "(H, W) pixel segmentation (class ids 0..6, no unit)."
+            "(H, W) pixel segmentation (class ids 0..6)."
         ),
     ] = None,
     png: Annotated[
@@ -244,10 +251,7 @@ def view_command(
     ] = None,
     pred_name: Annotated[
         str,
-        typer.Option(
-            help="Caption of the predicted labels in the figures (text, no unit), e.g. a model "
-            "name or 'ablated ground truth'."
-        ),
+        typer.Option(help="Caption of the predicted labels in the figures, e.g. a model name."),
     ] = "predicted",
     prediction_png: Annotated[
         Path | None,
@@ -259,7 +263,7 @@ def view_command(
     width: Annotated[int, typer.Option(help="3D view width, pixels.")] = 1200,
     height: Annotated[int, typer.Option(help="3D view height, pixels.")] = 520,
     interactive: Annotated[
-        bool, typer.Option(help="Open an interactive 3D window (needs a display; no unit).")
+        bool, typer.Option("--interactive", help="Open an interactive 3D window (needs a display).")
     ] = False,
 ) -> None:
     """Draw one sample: 3D view (part, taxels, contactor in place), Fig. 1 panel, sequence."""
@@ -268,6 +272,8 @@ def view_command(
             raise ConfigError(f"--color {color!r} unknown; choose one of {', '.join(COLORS)}")
         if color == "prediction" and pred is None:
             raise ConfigError("--color prediction needs --pred FILE.npy (predicted classes)")
+        require_positive("--width", width, "pixels")
+        require_positive("--height", height, "pixels")
         if interactive and not has_display():
             raise ConfigError("--interactive needs a display (DISPLAY unset); write --png instead")
         if not (png or panel or sequence or interactive or prediction_png):
@@ -275,7 +281,7 @@ def view_command(
         if dataset is not None:
             scene, tmap, smp, seq = from_dataset(dataset, sample)
         else:
-            scene, tmap, smp, seq = simulated(part, seed, index, sequence is not None)
+            scene, tmap, smp, seq = simulated(part, seed, sample, sequence is not None)
         predicted, pred_pixels = load_predicted(pred, tmap, tmap.n_taxels) if pred else (None, None)
         opts = {
             "png": png,

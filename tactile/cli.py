@@ -10,7 +10,10 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from tactile.errors import HandskinError
+from tactile.errors import ConfigError, HandskinError, require_positive
+from tactile.layout import TaxelLayout
+from tactile.synthetic import cylinder_sector_layout
+from tactile.tactile_map import TactileMap
 
 
 def describe_map(tmap) -> str:
@@ -32,8 +35,9 @@ def map_command(
     layout: Annotated[
         Path | None,
         typer.Argument(
+            metavar="LAYOUT",
             help="Taxel layout file: .npz, .csv or iCub .txt. Default: the built-in forearm-like "
-            "layout (a hex lattice of 11 mm pitch on a 75 mm-radius sector, 247 × 362 mm)."
+            "layout (a hex lattice of 11 mm pitch on a 75 mm-radius sector, 247 × 362 mm).",
         ),
     ] = None,
     png: Annotated[
@@ -44,16 +48,18 @@ def map_command(
         str | None,
         typer.Option(help="Units of positions in a plain file without unit columns: 'm' or 'mm'."),
     ] = None,
-    save: Annotated[
-        Path | None, typer.Option(help="Save the map (look-up table) to this .npz file.")
+    out: Annotated[
+        Path | None,
+        typer.Option(help="Save the map (.npz: flat mesh and grid; TactileMap.load reads it)."),
     ] = None,
 ) -> None:
     """Build the tactile map of a taxel layout; print counts, image size and distortion."""
-    from tactile.tactile_map import TactileMap
-
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
+            require_positive("--step-mm", step_mm, "mm/pixel")
+            if units not in (None, "m", "mm"):
+                raise ConfigError(f"--units {units!r} unknown; choose m or mm")
             lay = _load_layout(layout, units)
             tmap = TactileMap.build(lay, step_mm=step_mm)
     except HandskinError as err:
@@ -62,11 +68,11 @@ def map_command(
     for w in caught:
         typer.echo(f"warning: {w.message}", err=True)
     typer.echo(describe_map(tmap))
-    if save is not None:
-        tmap.save(save)
-        typer.echo(f"map saved to {save}")
+    if out is not None:
+        tmap.save(out)
+        typer.echo(f"map saved to {out}")
     if png is not None:
-        from tactile.plot import save_map_picture
+        from tactile.plot import save_map_picture  # start-up: matplotlib
 
         save_map_picture(tmap, png, title=lay.name)
         typer.echo(f"picture written to {png}")
@@ -74,9 +80,6 @@ def map_command(
 
 def _load_layout(path: Path | None, units: str | None):
     """The layout in ``path``, or the built-in forearm-like layout when no path is given."""
-    from tactile.layout import TaxelLayout
-    from tactile.synthetic import cylinder_sector_layout
-
     if path is None:
         return cylinder_sector_layout(name="forearm-like lattice (built-in)")[0]
     lay = TaxelLayout.load(path, units=units)

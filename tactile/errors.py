@@ -6,6 +6,7 @@ message names the problem and the fix.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 
@@ -39,3 +40,13 @@ def require_folder(
             if not p.is_dir():
                 raise ConfigError(f"{what} {path}: {p} is a file, not a folder. Fix: {fix}")
             return
+
+
+def require_positive(flag: str, value: float, unit: str = "") -> float:
+    """``value`` when it is a finite number > 0, else a ConfigError naming the command-line
+    ``flag`` (e.g. ``--step-mm 0 is out of range; allowed > 0 mm/pixel``)."""
+    if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+        raise ConfigError(
+            f"{flag} {value} is out of range; allowed > 0{f' {unit}' if unit else ''}"
+        )
+    return value

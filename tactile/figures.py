@@ -21,6 +21,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch
+from PIL import Image
 
 from tactile.errors import MapError
 from tactile.labels import CLASS_NAMES, PALETTE, part_summary
@@ -197,8 +198,6 @@ def save_sequence_gif(
 ) -> Path:
     """Animated GIF of (T, H, W) uint8 tactile images at ``fps`` frames/s (10 Hz = real time),
     each pixel enlarged ``scale`` times; loops forever. Returns the path."""
-    from PIL import Image
-
     frames = [Image.fromarray(f) for f in sequence_frames_rgb(images, scale)]
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -3,20 +3,20 @@
 Classes follow Albini & Cannata (IJRR 2020): background, the five fingers and the palm. A label
 image is consistent with the tactile image: a pixel is labelled where the tactile image is
 non-zero, with the class whose own (interpolated, dilated) pressure field is largest there.
+
+The functions take a `tactile.tactile_map.TactileMap` as ``tmap``; the map's own
+``label_image`` method calls them, so this module sits below it and does not import it.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 
-from tactile import morphology
 from tactile.errors import MapError
-
-if TYPE_CHECKING:
-    from tactile.tactile_map import TactileMap
+from tactile.morphology import dilate
 
 CLASS_NAMES = ("background", "thumb", "index", "middle", "ring", "pinkie", "palm")
 # RGB per class, after the paper's Fig. 10 (one distinct hue per part; background black).
@@ -58,7 +58,7 @@ def check_labels(labels: np.ndarray, n_taxels: int, n_classes: int = N_CLASSES) 
 
 
 def label_image(
-    tmap: TactileMap,
+    tmap,
     p: np.ndarray,
     labels: np.ndarray,
     *,
@@ -105,7 +105,7 @@ def label_image(
     fields = np.where(lab[None, :] == classes[:, None], p[None, :], 0.0)
     rows, cols = _grown_box(foreground, dilate_px)
     interpolated = tmap.interpolate(fields)[:, rows, cols]
-    spread = morphology.dilate(np.ascontiguousarray(interpolated), dilate_px)
+    spread = dilate(np.ascontiguousarray(interpolated), dilate_px)
     out[rows, cols] = np.where(foreground[rows, cols], classes[spread.argmax(axis=0)], 0)
     return out
 
@@ -126,7 +126,7 @@ def colorize(classes: np.ndarray) -> np.ndarray:
     return PALETTE[np.asarray(classes)]
 
 
-def neighbourhood_matrix(tmap: TactileMap, radius_mm: float) -> sp.csr_matrix:
+def neighbourhood_matrix(tmap, radius_mm: float) -> sp.csr_matrix:
     """(N, H * W) 0/1 CSR: pixels whose centre lies within ``radius_mm`` of any of a taxel's
     vertices on the map (a taxel on a seam has several)."""
     (height, width), step = tmap.shape, tmap.step_mm
@@ -149,7 +149,7 @@ def neighbourhood_matrix(tmap: TactileMap, radius_mm: float) -> sp.csr_matrix:
     return matrix
 
 
-def backproject(tmap: TactileMap, seg: np.ndarray, *, radius_mm: float | None = None) -> np.ndarray:
+def backproject(tmap, seg: np.ndarray, *, radius_mm: float | None = None) -> np.ndarray:
     """Per-taxel labels from a per-pixel segmentation.
 
     Each taxel takes the most frequent non-background class among the pixels within

@@ -1,18 +1,21 @@
 """`TaxelLayout`: the 3D taxel positions of one skin part, validated once at construction.
 
 The class is a thin frozen facade; the checks and the channel→taxel maths are small functions on
-arrays below it. File formats (iCub calibration ``.txt``, ``.csv``, ``.npz``) live in
-`tactile.layout_io` and are described in ``docs/layout_formats.md``.
+arrays below it. File formats (iCub calibration ``.txt``, ``.csv``, ``.npz``) are read and written
+by `tactile.layout_io` (described in ``docs/layout_formats.md``); `TaxelLayout.load` validates
+what it reads.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from os import PathLike
+from pathlib import Path
 
 import numpy as np
 
 from tactile.errors import LayoutError, MapError
+from tactile.layout_io import read_layout, write_layout
 
 NORMAL_TOLERANCE = 1e-3  # |1 - |n|| below this is rounding and gets normalised; above, an error
 COLLINEAR_RTOL = 1e-7  # RMS spread off the main axis, relative to the extent, below which = a line
@@ -212,16 +215,17 @@ class TaxelLayout:
         """Read a layout from ``.npz``, ``.csv`` or ``.txt`` (iCub calibration or plain xyz).
 
         ``units`` ("m" or "mm") gives the unit of plain ``x,y,z`` CSV columns and plain xyz text.
+        LayoutError names the file (and line) of what is wrong.
         """
-        from tactile.layout_io import read_layout
-
-        return read_layout(path, units=units)
+        found = read_layout(path, units=units)
+        try:
+            return cls(**found)
+        except LayoutError as err:
+            raise LayoutError(f"{Path(path)}: {err}") from None
 
     def save(self, path: str | PathLike[str]) -> None:
         """Write to ``.npz`` or ``.csv`` (by suffix), atomically: nothing is written on failure."""
-        from tactile.layout_io import write_layout
-
-        write_layout(self, path)
+        write_layout({f.name: getattr(self, f.name) for f in fields(self)}, path)
 
     def taxels_from_channels(self, frame: np.ndarray) -> np.ndarray:
         """Map a raw channel frame to per-taxel readings (merged duplicates averaged).

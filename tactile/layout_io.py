@@ -1,6 +1,11 @@
 """Readers and writers of taxel layouts: iCub calibration ``.txt``, plain xyz ``.txt``, the
 project's ``.csv`` and ``.npz``. Formats and the iCub reading policy: ``docs/layout_formats.md``.
 
+A reader returns the keyword arguments of `tactile.layout.TaxelLayout` (``positions_m`` (N, 3)
+float, m; optional ``normals``, ``module_ids``, ``channel_ids``, ``merged_channels``,
+``n_channels``; ``name``), which validates them; a writer takes the same fields as a mapping.
+`TaxelLayout.load` and `TaxelLayout.save` are the entry points.
+
 Every error is a LayoutError naming the file, the 1-based line when there is one, and the fix.
 Writes are atomic (temporary file in the same folder, then ``os.replace``).
 """
@@ -12,7 +17,7 @@ import os
 import re
 import tempfile
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from os import PathLike
 from pathlib import Path
 from typing import IO, Any
@@ -20,7 +25,6 @@ from typing import IO, Any
 import numpy as np
 
 from tactile.errors import LayoutError
-from tactile.layout import TaxelLayout
 
 FORMAT_VERSION = 1
 CSV_MAGIC = f"# handskin taxel layout v{FORMAT_VERSION}"
@@ -31,10 +35,11 @@ CSV_OPTIONAL = ("nx", "ny", "nz", "module", "channel", "merged_channels")
 SUFFIX_HELP = "accepted suffixes: .npz, .csv, .txt (iCub calibration or plain xyz)"
 
 Lines = list[tuple[int, str]]  # (1-based line number, text)
+Fields = dict[str, Any]  # keyword arguments of TaxelLayout
 
 
-def read_layout(path: str | PathLike[str], *, units: str | None = None) -> TaxelLayout:
-    """Read a layout, dispatching on the suffix (see `TaxelLayout.load`)."""
+def read_layout(path: str | PathLike[str], *, units: str | None = None) -> Fields:
+    """The layout fields in ``path``, dispatching on the suffix (see `TaxelLayout.load`)."""
     path = Path(path)
     if units is not None and units not in UNIT_SCALE:
         raise LayoutError(f"{path}: unknown units={units!r}; accepted units: m, mm")
@@ -44,13 +49,14 @@ def read_layout(path: str | PathLike[str], *, units: str | None = None) -> Taxel
     return readers[path.suffix.lower()](path, units)
 
 
-def write_layout(layout: TaxelLayout, path: str | PathLike[str]) -> None:
-    """Write ``.npz`` or ``.csv`` atomically; a failed write leaves any existing file untouched."""
+def write_layout(layout: Mapping[str, Any], path: str | PathLike[str]) -> None:
+    """Write layout fields to ``.npz`` or ``.csv`` atomically; a failed write leaves any existing
+    file untouched."""
     path = Path(path)
     if path.suffix.lower() == ".npz":
         _atomic_write(path, "wb", lambda fh: write_npz(layout, fh))
     elif path.suffix.lower() == ".csv":
-        _check_csv_name(path, layout.name)
+        _check_csv_name(path, layout["name"])
         _atomic_write(path, "w", lambda fh: fh.write(csv_text(layout)))
     else:
         raise LayoutError(f"{path}: cannot save to suffix {path.suffix!r}; use .npz or .csv")
@@ -66,14 +72,6 @@ def _atomic_write(path: Path, mode: str, write: Callable[[IO[Any]], object]) -> 
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
-
-
-def _make(path: Path, **fields: Any) -> TaxelLayout:
-    """Build the layout, prefixing validation errors with the file name."""
-    try:
-        return TaxelLayout(**fields)
-    except LayoutError as err:
-        raise LayoutError(f"{path}: {err}") from None
 
 
 def _numbered_lines(path: Path) -> Lines:
@@ -103,19 +101,20 @@ def _floats(path: Path, line: int, tokens: list[str], what: str, count: int = 0)
 # ---- npz --------------------------------------------------------------------------------------
 
 
-def write_npz(layout: TaxelLayout, fh: IO[bytes]) -> None:
+def write_npz(layout: Mapping[str, Any], fh: IO[bytes]) -> None:
     """All fields, absent optional arrays omitted, n_channels -1 when None."""
     arrays = {
-        key: getattr(layout, key)
+        key: layout[key]
         for key in ("normals", "module_ids", "channel_ids", "merged_channels")
-        if getattr(layout, key) is not None
+        if layout[key] is not None
     }
-    arrays["n_channels"] = np.int64(-1 if layout.n_channels is None else layout.n_channels)
+    n_channels = layout["n_channels"]
+    arrays["n_channels"] = np.int64(-1 if n_channels is None else n_channels)
     arrays["format_version"] = np.int64(FORMAT_VERSION)
-    np.savez(fh, positions_m=layout.positions_m, name=np.str_(layout.name), **arrays)
+    np.savez(fh, positions_m=layout["positions_m"], name=np.str_(layout["name"]), **arrays)
 
 
-def read_npz(path: Path, units: str | None) -> TaxelLayout:
+def read_npz(path: Path, units: str | None) -> Fields:
     """Read a file written by `write_npz` (always metres)."""
     if units not in (None, "m"):
         raise LayoutError(f"{path}: .npz layouts are in metres; drop units={units!r}")
@@ -132,7 +131,7 @@ def read_npz(path: Path, units: str | None) -> TaxelLayout:
         )
     n_ch = int(fields.pop("n_channels", -1))
     name = str(fields.pop("name", ""))
-    return _make(path, n_channels=None if n_ch < 0 else n_ch, name=name, **fields)
+    return {"n_channels": None if n_ch < 0 else n_ch, "name": name, **fields}
 
 
 # ---- csv --------------------------------------------------------------------------------------
@@ -143,32 +142,31 @@ def _check_csv_name(path: Path, name: str) -> None:
         raise LayoutError(f"{path}: layout name {name!r} has a line break. Fix: rename it")
 
 
-def csv_text(layout: TaxelLayout) -> str:
+def csv_text(layout: Mapping[str, Any]) -> str:
     """The documented CSV: comment block, header row with units, one row per taxel (metres)."""
-    head = [CSV_MAGIC, f"# name: {layout.name}"]
-    if layout.n_channels is not None:
-        head.append(f"# n_channels: {layout.n_channels}")
+    head = [CSV_MAGIC, f"# name: {layout['name']}"]
+    if layout["n_channels"] is not None:
+        head.append(f"# n_channels: {layout['n_channels']}")
+    positions, normals = layout["positions_m"], layout["normals"]
+    n_taxels = len(positions)
     columns: list[tuple[str, list[str]]] = [
-        (f"{axis}_m", [repr(float(v)) for v in layout.positions_m[:, i]])
-        for i, axis in enumerate("xyz")
+        (f"{axis}_m", [repr(float(v)) for v in positions[:, i]]) for i, axis in enumerate("xyz")
     ]
-    if layout.normals is not None:
-        columns += [
-            (f"n{a}", [repr(float(v)) for v in layout.normals[:, i]]) for i, a in enumerate("xyz")
-        ]
-    for key, ids in (("module", layout.module_ids), ("channel", layout.channel_ids)):
+    if normals is not None:
+        columns += [(f"n{a}", [repr(float(v)) for v in normals[:, i]]) for i, a in enumerate("xyz")]
+    for key, ids in (("module", layout["module_ids"]), ("channel", layout["channel_ids"])):
         if ids is not None:
             columns.append((key, [str(int(v)) for v in ids]))
-    if layout.merged_channels is not None:
-        extra: list[list[str]] = [[] for _ in range(layout.n_taxels)]
-        for channel, taxel in layout.merged_channels:
+    if layout["merged_channels"] is not None:
+        extra: list[list[str]] = [[] for _ in range(n_taxels)]
+        for channel, taxel in layout["merged_channels"]:
             extra[taxel].append(str(int(channel)))
         columns.append(("merged_channels", [" ".join(e) for e in extra]))
-    rows = [",".join(col[1][r] for col in columns) for r in range(layout.n_taxels)]
+    rows = [",".join(col[1][r] for col in columns) for r in range(n_taxels)]
     return "\n".join([*head, ",".join(c[0] for c in columns), *rows]) + "\n"
 
 
-def read_csv(path: Path, units: str | None) -> TaxelLayout:
+def read_csv(path: Path, units: str | None) -> Fields:
     """Read the documented CSV (see ``docs/layout_formats.md``)."""
     lines = [(n, t) for n, t in _numbered_lines(path) if t.strip()]
     meta = _csv_meta(path, [(n, t) for n, t in lines if t.lstrip().startswith("#")])
@@ -184,12 +182,11 @@ def read_csv(path: Path, units: str | None) -> TaxelLayout:
             _floats(path, line, cells, f"columns {','.join(header)}", len(header))
         for c, v in zip(header, cells, strict=True):
             cols[c].append(v)
-    return _make(
-        path,
-        name=meta.get("name", path.stem),
-        n_channels=meta.get("n_channels"),
+    return {
+        "name": meta.get("name", path.stem),
+        "n_channels": meta.get("n_channels"),
         **_csv_fields(path, [n for n, _ in body[1:]], header, cols, scale),
-    )
+    }
 
 
 def _csv_meta(path: Path, comments: Lines) -> dict[str, Any]:
@@ -215,7 +212,7 @@ def _csv_units(path: Path, line: int, header: list[str], units: str | None) -> f
     suffixes = {c.partition("_")[2] for c in pos}
     fix = (
         "Fix: name the columns x_m,y_m,z_m or x_mm,y_mm,z_mm, or for plain x,y,z pass "
-        "units='m' or units='mm' to TaxelLayout.load"
+        "units='m' or units='mm' to TaxelLayout.load (--units m or mm to handskin map)"
     )
     unknown = [c for c in header if c not in pos and c not in CSV_OPTIONAL]
     if unknown or sorted(c[0] for c in pos) != ["x", "y", "z"] or len(suffixes) != 1:
@@ -270,7 +267,7 @@ def _csv_fields(
 # ---- txt: iCub calibration or plain xyz -------------------------------------------------------
 
 
-def read_txt(path: Path, units: str | None) -> TaxelLayout:
+def read_txt(path: Path, units: str | None) -> Fields:
     """An iCub calibration file if it has iCub header keys, else plain xyz (needs ``units``)."""
     lines = _numbered_lines(path)
     if any(t.split()[0] in ICUB_KEYS for _, t in lines if t.split()):
@@ -278,22 +275,23 @@ def read_txt(path: Path, units: str | None) -> TaxelLayout:
     return read_xyz(path, lines, units)
 
 
-def read_xyz(path: Path, lines: Lines, units: str | None) -> TaxelLayout:
+def read_xyz(path: Path, lines: Lines, units: str | None) -> Fields:
     """Plain text: one taxel per line, ``x y z`` or ``x y z nx ny nz`` ('#' comments, commas ok)."""
     if units is None:
         raise LayoutError(
             f"{path}: plain xyz text has no unit and no iCub header. Fix: pass "
-            "units='m' or units='mm' (or add the iCub '[calibration]' header)"
+            "units='m' or units='mm' to TaxelLayout.load (--units m or mm to handskin map), "
+            "or add the iCub '[calibration]' header"
         )
     rows = [(n, t.replace(",", " ").split()) for n, t in lines if t.strip() and t.strip()[0] != "#"]
     width = 6 if rows and len(rows[0][1]) == 6 else 3
     what = "x y z nx ny nz" if width == 6 else "x y z"
     data = np.array([_floats(path, n, t, what, width) for n, t in rows]).reshape(-1, width)
     normals = data[:, 3:] if width == 6 else None
-    return _make(path, positions_m=data[:, :3] * UNIT_SCALE[units], normals=normals, name=path.stem)
+    return {"positions_m": data[:, :3] * UNIT_SCALE[units], "normals": normals, "name": path.stem}
 
 
-def read_icub(path: Path, lines: Lines, scale: float = 1.0) -> TaxelLayout:
+def read_icub(path: Path, lines: Lines, scale: float = 1.0) -> Fields:
     """iCub skinGui calibration file; policy in ``docs/layout_formats.md``.
 
     Keeps channels with a non-zero row whose taxel2Repr is >= 0 (or beyond its length); merges
@@ -317,16 +315,15 @@ def read_icub(path: Path, lines: Lines, scale: float = 1.0) -> TaxelLayout:
             f"merged into {first.size} taxels (readings averaged)",
             stacklevel=5,
         )
-    return _make(
-        path,
-        positions_m=data[keep[first], :3] * scale,
-        normals=None if normals is None else normals[first],
-        module_ids=keep[first] // PADS_PER_MODULE,
-        channel_ids=keep[first],
-        merged_channels=merged,
-        n_channels=len(data),
-        name=name or path.stem,
-    )
+    return {
+        "positions_m": data[keep[first], :3] * scale,
+        "normals": None if normals is None else normals[first],
+        "module_ids": keep[first] // PADS_PER_MODULE,
+        "channel_ids": keep[first],
+        "merged_channels": merged,
+        "n_channels": len(data),
+        "name": name or path.stem,
+    }
 
 
 def _icub_header(path: Path, header: Lines) -> tuple[str, np.ndarray]:

@@ -4,7 +4,8 @@ Albini & Cannata (IJRR 2020): the taxel cloud is triangulated and flattened, a r
 ``step_mm`` is laid over the flat map, and every grid point inside a triangle interpolates the
 pressures of the triangle's three taxels. The table is computed once (:meth:`TactileMap.from_flat`
 or :meth:`TactileMap.build`) and applied as a sparse matrix product at run time. The maths lives in
-:mod:`tactile.raster` and :mod:`tactile.morphology`; this class is a thin frozen facade.
+:mod:`tactile.raster`, :mod:`tactile.morphology` and :mod:`tactile.labels`; this class is a thin
+frozen facade.
 """
 
 from __future__ import annotations
@@ -18,9 +19,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 import scipy.sparse as sp
 
-from tactile import morphology, raster
+import tactile.raster as raster
 from tactile.distortion import DistortionReport, distortion_report
 from tactile.errors import MapError
+from tactile.flatten import flatten
+from tactile.labels import label_image
+from tactile.morphology import erode_dilate
+from tactile.surface import triangulate
 
 if TYPE_CHECKING:
     from tactile.layout import TaxelLayout
@@ -126,9 +131,6 @@ class TactileMap:
         kw : options of :func:`tactile.surface.triangulate` (``max_edge_factor``) and
         :func:`tactile.flatten.flatten` (``method``), routed by name.
         """
-        from tactile.flatten import flatten
-        from tactile.surface import triangulate
-
         tri_kw, flat_kw = _route_options(kw, triangulate, flatten)
         mesh = triangulate(layout.positions_m, layout.normals, **tri_kw)
         flat = flatten(layout.positions_m, mesh, **flat_kw)
@@ -193,8 +195,8 @@ class TactileMap:
         grey = raster.grey_levels(self.interpolate(p), p.max(axis=-1))
         grey = np.ascontiguousarray(grey)
         if grey.ndim == 2 or len(grey) == 0:
-            return morphology.erode_dilate(grey, erode_px, dilate_px)
-        return np.stack([morphology.erode_dilate(g, erode_px, dilate_px) for g in grey])
+            return erode_dilate(grey, erode_px, dilate_px)
+        return np.stack([erode_dilate(g, erode_px, dilate_px) for g in grey])
 
     def label_image(
         self, p: np.ndarray, labels: np.ndarray, *, erode_px: int = 2, dilate_px: int = 4
@@ -207,8 +209,6 @@ class TactileMap:
         -------
         classes : (H, W) uint8 — 0 where the tactile image is 0.
         """
-        from tactile.labels import label_image
-
         return label_image(self, p, labels, erode_px=erode_px, dilate_px=dilate_px)
 
     def _check_pressures(self, p: np.ndarray) -> np.ndarray:

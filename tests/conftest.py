@@ -1,32 +1,14 @@
 """Shared fixtures: the real public data in ../shared/data (never copied into the project), the
-keyed split's rule written out slowly, and the docs' diagnostic scripts as modules."""
+keyed split's rule written out slowly."""
 
 from __future__ import annotations
 
-import importlib.util
-from collections.abc import Callable
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-
-
-@pytest.fixture(scope="session")
-def doc_script() -> Callable[[str], ModuleType]:
-    """``doc_script("check_splits")``: docs/check_splits.py (a diagnostic the docs run, not a
-    package module) loaded from its file, for its tests."""
-
-    def load(name: str) -> ModuleType:
-        path = Path(__file__).resolve().parents[1] / "docs" / f"{name}.py"
-        spec = importlib.util.spec_from_file_location(name, path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-        return module
-
-    return load
 
 
 @pytest.fixture(scope="session")

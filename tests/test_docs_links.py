@@ -47,3 +47,45 @@ def test_relative_links_resolve(page: Path):
         elif anchor and dest.suffix == ".md" and anchor not in anchors(dest):
             broken.append(f"{target} (no heading #{anchor} in {dest.name})")
     assert not broken, f"{page.name}: broken links: {broken}"
+
+
+COMMAND = re.compile(r"^\s*handskin ((?:experiment )?[a-z0-9-]+)(.*)$", re.M)
+
+
+def code_of(text: str) -> str:
+    """The page's code: fenced blocks (continued lines joined) and inline code spans, one per
+    line."""
+    blocks = [m.group(0).strip("`") for m in FENCE.finditer(text)]
+    spans = re.findall(r"`([^`\n]+)`", FENCE.sub("", text))
+    return "\n".join(blocks + spans).replace("\\\n", " ").replace("&&", "\n")
+
+
+def _flags(command: str) -> set[str]:
+    """Every option name of ``handskin <command>`` (both halves of --x/--no-x)."""
+    import typer.main
+
+    from handskin.cli import app
+
+    node = typer.main.get_command(app)
+    for word in command.split():
+        node = node.commands[word]  # type: ignore[attr-defined]
+    return {name for p in node.params for name in (*p.opts, *p.secondary_opts)}
+
+
+REPORTS = sorted((ROOT / "reports").rglob("*.md"))
+
+
+@pytest.mark.parametrize("page", PAGES + REPORTS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_commands_in_the_docs_use_real_options(page: Path):
+    """Every ``handskin <command> ... --option`` written in a page names an option the command
+    has (a renamed or removed flag left in the docs fails here)."""
+    wrong = []
+    for command, rest in COMMAND.findall(code_of(page.read_text())):
+        try:
+            known = _flags(command)
+        except KeyError:
+            wrong.append(f"handskin {command}: no such command")
+            continue
+        used = set(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", rest.split("#")[0]))
+        wrong += [f"handskin {command} {flag}" for flag in sorted(used - known)]
+    assert not wrong, f"{page.name}: {wrong}"

@@ -30,9 +30,7 @@ class HandsNet(nn.Module):
     ``(B, in_channels, H, W)`` float in [0, 1], ``(H, W) = input_size`` → ``(B, num_classes)``
     logits. The first fully connected layer's size depends on ``input_size`` (pixels).
     ``zero_init_output`` starts the last layer's weights at zero instead of Glorot (*ours*: it
-    keeps Adam from killing the narrow ReLU head in its first steps). ``dropout_scale``
-    multiplies all six dropout rates (1 = the paper's; 0 keeps the layers as identities, so the
-    modules and weights are the same at any scale).
+    keeps Adam from killing the narrow ReLU head in its first steps).
     """
 
     task = "classification"
@@ -43,32 +41,25 @@ class HandsNet(nn.Module):
         in_channels: int = 1,
         input_size: tuple[int, int] = (68, 100),
         zero_init_output: bool = False,
-        dropout_scale: float = 1.0,
     ) -> None:
         super().__init__()
-        if not 0.0 <= dropout_scale < 1.0 / 0.6:
-            raise ConfigError(
-                f"HandsNet dropout_scale {dropout_scale}: the rates (up to 60 %) "
-                "times it must stay in [0, 1). Fix: 1 (the paper), 0 (none)"
-            )
-        k = float(dropout_scale)
         self.num_classes, self.in_channels = num_classes, in_channels
         self.input_size = (int(input_size[0]), int(input_size[1]))
         layers: list[nn.Module] = []
         c_in = in_channels
         for c_out, kernel, p_drop in HANDSNET_BLOCKS:
             layers += [ConvBNReLU(c_in, c_out, kernel, padding=1), nn.MaxPool2d(2, 2)]
-            layers += [nn.Dropout(p_drop * k)] if p_drop > 0 else []
+            layers += [nn.Dropout(p_drop)] if p_drop > 0 else []
             c_in = c_out
         self.features = nn.Sequential(*layers)
         self.classifier = nn.Sequential(
             nn.Flatten(),
             nn.Linear(self._flat_size(), 64),
             nn.ReLU(inplace=True),
-            nn.Dropout(0.6 * k),
+            nn.Dropout(0.6),
             nn.Linear(64, 32),
             nn.ReLU(inplace=True),
-            nn.Dropout(0.5 * k),
+            nn.Dropout(0.5),
             nn.Linear(32, num_classes),
         )
         init_weights(self)

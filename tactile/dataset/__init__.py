@@ -9,13 +9,14 @@ ingest of real recordings and PNG export. Format: ``docs/dataset_format.md``.
 """
 
 from tactile.dataset.export import export_png
+from tactile.dataset.folder import DATASET, INFO, chunk_path, list_chunks
 from tactile.dataset.ingest import ingest_recording
 from tactile.dataset.manifest import make_manifest
-from tactile.dataset.merge import DATASET, INFO, merge_chunks
+from tactile.dataset.merge import merge_chunks
 from tactile.dataset.reader import DatasetReader, open_dataset
 from tactile.dataset.schema import FIELDS, REQUIRED, Dims, FieldSpec, field_spec, validate_sample
 from tactile.dataset.splits import Split, split_indices
-from tactile.dataset.writer import DatasetWriter, chunk_path, list_chunks
+from tactile.dataset.writer import DatasetWriter
 
 __all__ = [
     "DATASET",

@@ -10,7 +10,10 @@ from typing import Annotated
 import numpy as np
 import typer
 
-from tactile.errors import DataError, HandskinError
+from tactile.dataset.export import export_png
+from tactile.dataset.ingest import ingest_recording
+from tactile.dataset.reader import open_dataset
+from tactile.errors import DataError, HandskinError, require_positive
 
 CLASSES = ("hand", "non_hand")
 
@@ -22,37 +25,45 @@ def _fail(err: Exception) -> None:
 
 def export_command(
     dataset_dir: Annotated[
-        Path, typer.Argument(help="Dataset folder (holding dataset.h5) or the dataset.h5 file.")
-    ],
-    png: Annotated[
         Path,
-        typer.Option(
-            help="Output folder for PNG images (8-bit grey tactile images, 1 pixel = step_mm "
-            "of the map, in hand/, non_hand/; RGB label images in labels/)."
+        typer.Argument(
+            metavar="DATASET", help="Dataset folder (holding dataset.h5) or the dataset.h5 file."
         ),
     ],
+    out: Annotated[
+        Path,
+        typer.Option(
+            help="Output folder of PNG images: 8-bit grey tactile images (1 pixel = the map's "
+            "step_mm) in hand/ and non_hand/, RGB label images in labels/."
+        ),
+    ],
+    progress: Annotated[
+        bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")
+    ] = True,
 ) -> None:
     """Export a dataset's tactile images and label images as PNG files."""
-    from tactile.dataset.export import export_png
-
     try:
-        written = export_png(dataset_dir, png)
+        written = export_png(dataset_dir, out, progress=progress)
     except HandskinError as err:
         _fail(err)
     for folder, n in sorted(written.items()):
         typer.echo(f"{folder:<11}{n} PNG files")
-    typer.echo(f"written to {png}")
+    typer.echo(f"written to {out}")
 
 
 def ingest_command(
     layout: Annotated[
-        Path, typer.Argument(help="Taxel layout file: iCub .txt, .csv (positions in m) or .npz.")
+        Path,
+        typer.Argument(
+            metavar="LAYOUT", help="Taxel layout file: iCub .txt, .csv (positions in m) or .npz."
+        ),
     ],
     frames: Annotated[
         Path,
         typer.Argument(
+            metavar="FRAMES",
             help="Frames, .csv or .npy, one frame per row, raw 16-bit counts: C = n_channels "
-            "columns (raw channel frames) or N = n_taxels columns (taxel frames)."
+            "columns (raw channel frames) or N = n_taxels columns (taxel frames).",
         ),
     ],
     out: Annotated[Path, typer.Option(help="Output dataset folder (new or empty; a folder path).")],
@@ -84,9 +95,9 @@ def ingest_command(
     ] = 1.0,
 ) -> None:
     """Turn a real skin recording (layout + frames) into a handskin dataset folder."""
-    from tactile.dataset.ingest import ingest_recording
-
     try:
+        require_positive("--step-mm", step_mm, "mm/pixel")
+        require_positive("--counts-per-pa", counts_per_pa, "counts/Pa")
         path = ingest_recording(
             layout,
             frames,
@@ -140,8 +151,7 @@ def _caption(ds, i: int) -> str:
 
 def write_sheet(dataset_dir: Path, png: Path, n: int = 24, **filters) -> Path:
     """Contact sheet (PNG) of up to ``n`` samples of a dataset, label colours over the images."""
-    from tactile.dataset import open_dataset
-    from tactile.sheet import save_contact_sheet
+    from tactile.sheet import save_contact_sheet  # start-up: matplotlib
 
     with open_dataset(dataset_dir) as ds:
         idx = select_samples(ds, n=n, **filters)
@@ -162,7 +172,10 @@ def write_sheet(dataset_dir: Path, png: Path, n: int = 24, **filters) -> Path:
 
 def sheet_command(
     dataset_dir: Annotated[
-        Path, typer.Argument(help="Dataset folder (holding dataset.h5) or the dataset.h5 file.")
+        Path,
+        typer.Argument(
+            metavar="DATASET", help="Dataset folder (holding dataset.h5) or the dataset.h5 file."
+        ),
     ],
     png: Annotated[Path, typer.Option(help="Output PNG file (100 dpi; one tile per sample).")],
     cls: Annotated[

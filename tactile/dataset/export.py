@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 from PIL import Image
+from tqdm import tqdm
 
 from tactile.dataset.reader import DatasetReader, open_dataset
 from tactile.labels import colorize
@@ -46,10 +47,13 @@ def save_png(path: Path, image: np.ndarray) -> None:
     Image.fromarray(np.ascontiguousarray(image, dtype=np.uint8)).save(path, format="PNG")
 
 
-def export_png(dataset_dir: str | Path, out_dir: str | Path) -> dict[str, int]:
+def export_png(
+    dataset_dir: str | Path, out_dir: str | Path, *, progress: bool = False
+) -> dict[str, int]:
     """Write every sample's tactile image (and hand label image) as PNG under ``out_dir``.
 
-    Returns {folder: number of files written} for the folders used.
+    progress : show a progress bar over the samples. Returns {folder: number of files written}
+    for the folders used.
     """
     ds = open_dataset(dataset_dir)
     out = Path(out_dir)
@@ -57,7 +61,7 @@ def export_png(dataset_dir: str | Path, out_dir: str | Path) -> dict[str, int]:
     actions = actions if isinstance(actions, list) else []
     written: dict[str, int] = {}
     with ds:
-        for i in range(len(ds)):
+        for i in tqdm(range(len(ds)), unit="sample", disable=not progress, dynamic_ncols=True):
             for folder, image in _pictures(ds, i):
                 (out / folder).mkdir(parents=True, exist_ok=True)
                 save_png(out / folder / f"{sample_stem(ds, i, actions)}.png", image)

@@ -149,6 +149,11 @@ def read_layout(g: h5py.Group) -> TaxelLayout:
     return TaxelLayout(**arrays, n_channels=None if n_ch < 0 else n_ch, name=str(g.attrs["name"]))
 
 
+def json_attr(obj: h5py.HLObject, key: str) -> object:
+    """A JSON attribute decoded."""
+    return json.loads(obj.attrs[key])
+
+
 def copy_tree(src: h5py.Group, dst: h5py.Group) -> None:
     """Copy groups, small datasets and attrs from ``src`` into ``dst`` (no timestamps)."""
     set_attrs(dst, dict(src.attrs))

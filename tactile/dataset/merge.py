@@ -16,16 +16,15 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from tactile.dataset import h5io
+import tactile.dataset.h5io as h5io
+from tactile.dataset.folder import CHUNKS, DATASET, INFO, STATIC, chunk_path, list_chunks
+from tactile.dataset.h5io import json_attr
 from tactile.dataset.manifest import read_manifest
 from tactile.dataset.schema import BY_NAME, STR, Dims, info_fields
 from tactile.dataset.splits import METHODS, TRAIN_FRACTION, split_indices
-from tactile.dataset.writer import CHUNKS, STATIC, chunk_path, json_attr, list_chunks
 from tactile.errors import DataError
 from tactile.labels import CLASS_NAMES, N_CLASSES
 
-DATASET = "dataset.h5"
-INFO = "info.json"
 PACKAGES = ("numpy", "h5py", "scipy", "scikit-image", "mujoco", "handskin")
 ATTR_DOCS = {
     "skin_counts_per_pa": "float, counts/Pa: nominal skin gain (pressure_from_raw)",

@@ -17,8 +17,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from tactile.dataset import h5io
-from tactile.dataset.merge import DATASET, INFO
+import tactile.dataset.h5io as h5io
+from tactile.dataset.folder import DATASET, INFO
 from tactile.dataset.readout import Readout
 from tactile.dataset.schema import BY_NAME, FIELDS, STR
 from tactile.errors import DataError
@@ -45,7 +45,8 @@ class DatasetReader:
 
     ``len(ds)``: samples S. ``ds[i]``: dict {field: value} of sample i (arrays; str for STR
     fields). ``ds["raw"]`` or ``ds.raw``: the field's h5py.Dataset, (S, ...) (sliced lazily).
-    ``fields``: names present. ``map``, ``layout``, ``splits``, ``info``, ``attrs``: see below.
+    ``fields``: names present. ``map``, ``layout``, ``splits``, ``info``, ``attrs``,
+    ``active_threshold_pa``: see below.
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
@@ -141,6 +142,16 @@ class DatasetReader:
     def attrs(self) -> dict[str, object]:
         """Root attributes, JSON ones decoded (config, versions, class_balance, rejects, ...)."""
         return {k: decode_attr(k, v) for k, v in self.file.attrs.items()}
+
+    @property
+    def active_threshold_pa(self) -> float:
+        """The pressure (Pa) above which this dataset's taxels are labelled active: its generation
+        config's ``episode.active_pa``; 0.0 when not recorded (e.g. an ingested recording)."""
+        config = self.attrs.get("config")
+        episode = config.get("episode") if isinstance(config, dict) else None
+        value = episode.get("active_pa", 0.0) if isinstance(episode, dict) else 0.0
+        is_number = isinstance(value, int | float) and not isinstance(value, bool)
+        return float(value) if is_number else 0.0
 
     @property
     def info(self) -> dict:

@@ -15,24 +15,21 @@ into ``dataset.h5`` — built reproducibly, so the same chunks give the same byt
 
 from __future__ import annotations
 
-import json
-import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import h5py
 import numpy as np
 
-from tactile.dataset import h5io
+import tactile.dataset.h5io as h5io
+from tactile.dataset.folder import CHUNKS, STATIC, chunk_path, list_chunks
 from tactile.dataset.manifest import claim_folder, jsonable, make_manifest
+from tactile.dataset.merge import merge_chunks
 from tactile.dataset.schema import BY_NAME, STR, Dims, validate_sample
 from tactile.errors import DataError
 from tactile.layout import TaxelLayout
 from tactile.tactile_map import TactileMap
 
-CHUNKS = "chunks"
-STATIC = "static.h5"  # chunks/static.h5: map, layout, dims and the caller's attrs, written once
-CHUNK_RE = re.compile(r"^chunk_(\d{6})\.h5$")
 RESERVED_ATTRS = frozenset(
     {
         "format",
@@ -50,19 +47,6 @@ RESERVED_ATTRS = frozenset(
         "n_samples",
     }
 )
-
-
-def chunk_path(folder: str | Path, k: int) -> Path:
-    """Path of chunk ``k`` in a dataset folder: ``chunks/chunk_{k:06d}.h5``."""
-    return Path(folder) / CHUNKS / f"chunk_{k:06d}.h5"
-
-
-def list_chunks(folder: str | Path) -> list[int]:
-    """Indices of the complete chunks of a dataset folder, sorted (temporary files ignored)."""
-    d = Path(folder) / CHUNKS
-    if not d.is_dir():
-        return []
-    return sorted(int(m.group(1)) for p in d.iterdir() if (m := CHUNK_RE.match(p.name)))
 
 
 def _check_attrs(attrs: Mapping[str, object]) -> dict[str, object]:
@@ -163,7 +147,7 @@ class DatasetWriter:
         if not done:
             return None
         with h5py.File(chunk_path(self.folder, done[0]), "r") as f:
-            return tuple(json_attr(f, "fields"))
+            return tuple(h5io.json_attr(f, "fields"))
 
     def merge(
         self,
@@ -173,19 +157,12 @@ class DatasetWriter:
         remove_chunks: bool = False,
     ) -> Path:
         """Merge the chunks into ``dataset.h5`` (see :func:`tactile.dataset.merge.merge_chunks`)."""
-        from tactile.dataset.merge import merge_chunks
-
         return merge_chunks(
             self.folder,
             n_chunks=n_chunks,
             train_fraction=train_fraction,
             remove_chunks=remove_chunks,
         )
-
-
-def json_attr(obj: h5py.HLObject, key: str) -> object:
-    """A JSON attribute decoded."""
-    return json.loads(obj.attrs[key])
 
 
 def _fill_chunk(

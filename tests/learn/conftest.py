@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 import torch
 
-from learn.config import ModelConfig, TrainConfig
-from learn.train import RunConfig, fit, load_data
+from learn.config import ModelConfig, RunConfig, TrainConfig
+from learn.data.load import load_data
+from learn.train.loop import fit
 from tactile import TactileMap
 from tactile.dataset import DatasetWriter
 from tactile.synthetic import cylinder_sector_layout
@@ -174,7 +175,7 @@ def resume_after_edit(run, data, folder, edit):
     """(uninterrupted run, run resumed) of ``run``: trained whole in ``folder/full``, and in
     ``folder/cut`` stopped after epoch 1, its last.pt's config edited in place by
     ``edit(config)``, then resumed with ``run``."""
-    from learn.checkpoint import load_checkpoint, save_checkpoint
+    from learn.train.checkpoint import load_checkpoint, save_checkpoint
 
     full = fit(run, data, folder / "full", progress=False)
     fit(run, data, folder / "cut", progress=False, stop_after_epoch=1)

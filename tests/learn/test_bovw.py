@@ -14,14 +14,15 @@ from skimage.draw import disk, line_aa
 from sklearn.svm import LinearSVC
 from typer.testing import CliRunner
 
-from learn.bovw import (
+from learn.classical.bovw import (
     BagOfVisualWords,
     dense_descriptors,
     image_descriptors,
     nearest_words,
     word_histogram,
 )
-from learn.classical import MODEL_FILE, LinearSvm, confusion, load_classical, split_images
+from learn.classical.run import confusion, load_classical, split_images
+from learn.classical.svm import MODEL_FILE, LinearSvm
 from learn.cli import register
 from learn.config import BovwConfig
 from tactile.dataset import open_dataset
@@ -170,7 +171,7 @@ def test_evaluate_fills_the_bovw_row(bovw_run, tiny_dataset, tmp_path):
     md = tmp_path / "report.md"
     res = CliRunner().invoke(
         app,
-        ["evaluate", str(bovw_run / MODEL_FILE), "--data", str(tiny_dataset), "--report", str(md)],
+        ["evaluate", str(tiny_dataset), str(bovw_run / MODEL_FILE), "--out", str(md)],
     )
     assert res.exit_code == 0, res.output
     (row,) = json.loads(md.with_suffix(".json").read_text())

@@ -10,13 +10,12 @@ import pytest
 import torch
 from torch import nn
 
-from learn.config import ModelConfig
-from learn.data import TorchTactileDataset
-from learn.ensemble import load_members
-from learn.folder import open_split
+from learn.config import ModelConfig, run_from_dict
+from learn.data.dataset import TorchTactileDataset
+from learn.data.load import open_split
+from learn.infer.ensemble import load_members
+from learn.infer.predict import Predictor, predict_image, segment
 from learn.inputs import net_input, net_labels
-from learn.predict import Predictor, predict_image, segment
-from learn.run_config import run_from_dict
 from tactile.config import to_dict
 from tactile.errors import ConfigError
 from tactile.resize import canvas_px, fit_canvas, resize_image, resize_labels
@@ -165,10 +164,10 @@ def test_evaluate_scores_a_canvas_model_on_its_canvas(tiny_dataset, tmp_path, ch
     import typer
     from typer.testing import CliRunner
 
-    from learn.checkpoint import load_checkpoint, model_from_checkpoint
     from learn.cli import register
-    from learn.evaluate import evaluate_tensors
-    from learn.folder import materialize
+    from learn.data.load import materialize
+    from learn.train.checkpoint import load_checkpoint, model_from_checkpoint
+    from learn.train.validation import evaluate_tensors
 
     ckpt = torch.load(checkpoints["segnet"], weights_only=True)
     ckpt["config"]["model"]["canvas_mm"] = [50.0, 120.0]
@@ -178,7 +177,7 @@ def test_evaluate_scores_a_canvas_model_on_its_canvas(tiny_dataset, tmp_path, ch
     md = tmp_path / "r.md"
     res = CliRunner().invoke(
         app,
-        ["evaluate", str(tmp_path / "canvas.pt"), "--data", str(tiny_dataset), "--report", str(md)],
+        ["evaluate", str(tiny_dataset), str(tmp_path / "canvas.pt"), "--out", str(md)],
     )
     assert res.exit_code == 0, res.output
     row = json.loads(md.with_suffix(".json").read_text())[0]
@@ -191,16 +190,15 @@ def test_evaluate_scores_a_canvas_model_on_its_canvas(tiny_dataset, tmp_path, ch
     plain = TorchTactileDataset(tiny_dataset, "test", "segment", SIZE, flips=False)
     assert evaluate_tensors(model, materialize(plain, progress=False), 7).cm.tolist() != row["cm"]
     assert "of a 50 × 120 mm canvas" in md.read_text()
-    assert list(tmp_path.glob("r_errors_*.png"))
 
 
 def test_vgg_svm_refuses_a_canvas_checkpoint(tmp_path):
     """VGG16 + SVM extracts features from stretched images, so a VGG16 trained on a canvas is
     refused with the fix instead of being fed inputs it never saw."""
-    from learn.checkpoint import make_checkpoint, save_checkpoint
+    from learn.classical.vgg_svm import VggSvmClassifier
+    from learn.config import RunConfig
     from learn.models import create_model
-    from learn.train import RunConfig
-    from learn.vgg_svm import VggSvmClassifier
+    from learn.train.checkpoint import make_checkpoint, save_checkpoint
 
     model = ModelConfig("vgg16", 2, width=0.0625, input_size=SIZE, canvas_mm=(50.0, 80.0))
     run = RunConfig(model=model)
@@ -210,21 +208,3 @@ def test_vgg_svm_refuses_a_canvas_checkpoint(tmp_path):
     )
     with pytest.raises(ConfigError, match=r"canvas; VGG16 \+ SVM reads images stretched.*Fix"):
         VggSvmClassifier.from_checkpoint(path)
-
-
-def test_report_rows_differing_only_by_canvas_say_so():
-    from learn.row_labels import row_labels
-
-    a = {
-        "arch": "handsnet",
-        "config": {"model": {}},
-        "checkpoint": "/r/a/best.pt",
-        "train_data": {"path": "/d/ee", "n_train": 700},
-        "tta_views": None,
-    }
-    b = dict(a, checkpoint="/r/b/best.pt", canvas_mm=[229.0, 383.0])
-    assert row_labels([a, b]) == [
-        "HandsNet, 68 x 100 px",
-        "HandsNet, 68 x 100 px on a 229 x 383 mm canvas",
-    ]
-    assert row_labels([b]) == ["HandsNet"]

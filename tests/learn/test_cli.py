@@ -10,8 +10,8 @@ import torch
 import typer
 from typer.testing import CliRunner
 
-from learn.checkpoint import load_checkpoint
 from learn.cli import register
+from learn.train.checkpoint import load_checkpoint
 from tactile.dataset import open_dataset
 
 runner = CliRunner()
@@ -60,11 +60,10 @@ def test_train_evaluate_predict(app, tiny_dataset, small_config, checkpoints, tm
         app,
         [
             "evaluate",
+            str(tiny_dataset),
             str(out / "best.pt"),
             str(checkpoints["segnet"]),
-            "--data",
-            str(tiny_dataset),
-            "--report",
+            "--out",
             str(md),
         ],
     )
@@ -76,7 +75,6 @@ def test_train_evaluate_predict(app, tiny_dataset, small_config, checkpoints, tm
         app,
         [
             "predict",
-            "--frame",
             str(frame),
             "--map",
             str(tiny_dataset),
@@ -144,21 +142,24 @@ def test_canvas_option_reaches_the_checkpoint(app, tiny_dataset, small_config, t
     ("args", "message"),
     [
         (["train", "{missing}", "--out", "{out}"], "no dataset or image folder"),
-        (["train", "{data}", "--out", "{out}", "--arch", "resnet"], "unknown arch 'resnet'"),
-        (["train", "{data}", "--out", "{out}", "--config", "{bad}"], "key 'train.learning_rate'"),
-        (["evaluate", "{out}/none.pt", "--data", "{data}"], "no checkpoint"),
-        (["evaluate", "{bad}", "{out}/../bad.toml", "--data", "{data}"], "is given twice"),
         (
-            ["evaluate", "{out}/none.pt", "--data", "{data}", "--time-rounds", "0"],
+            ["train", "{data}", "--out", "{out}", "--arch", "resnet"],
+            "--arch 'resnet': choose one of",
+        ),
+        (["train", "{data}", "--out", "{out}", "--config", "{bad}"], "key 'train.learning_rate'"),
+        (["evaluate", "{data}", "{out}/none.pt"], "no checkpoint"),
+        (["evaluate", "{data}", "{bad}", "{out}/../bad.toml"], "is given twice"),
+        (
+            ["evaluate", "{data}", "{out}/none.pt", "--time-rounds", "0"],
             "time rounds must be a whole number >= 1",
         ),
         (
-            ["evaluate", "{out}/none.pt", "--data", "{data}", "--time-runs", "0"],
+            ["evaluate", "{data}", "{out}/none.pt", "--time-runs", "0"],
             "--time-runs 1 or more",
         ),
         (["train", "{data}", "--out", "{bad}"], "bad.toml is a file, not a folder"),
         (["train", "{data}", "--out", "{bad}/run", "--arch", "bovw"], "is a file, not a folder"),
-        (["predict", "--frame", "{bad}"], "--frame with --map"),
+        (["predict", "{bad}"], "or a frame (.csv, .npy)"),
         (["train", "{data}", "--out", "{out}", "--precision", "fp16"], "precision 'fp16'"),
         (
             ["train", "{data}", "--out", "{out}", "--arch", "bovw", "--precision", "bf16"],
@@ -193,31 +194,6 @@ def test_canvas_option_reaches_the_checkpoint(app, tiny_dataset, small_config, t
             "--canvas-mm does not apply",
         ),
         (["train", "{data}", "--out", "{out}", "--device", "gpu"], "is not a training device"),
-        (
-            ["train", "{data}", "--out", "{out}", "--distill-from", "{out}/none.pt"],
-            "no teacher checkpoint",
-        ),
-        (
-            ["train", "{data}", "--out", "{out}", "--arch", "bovw", "--distill-from", "{bad}"],
-            "--distill-from does not apply",
-        ),
-        (
-            ["train", "{data}", "--out", "{out}", "--arch", "segnet", "--distill-from", "{bad}"],
-            "needs a classifier",
-        ),
-        (
-            [
-                "train",
-                "{data}",
-                "--out",
-                "{out}",
-                "--distill-from",
-                "{bad}",
-                "--cv-grid",
-                "train.lr=0.1,0.01",
-            ],
-            "--distill-from with --cv-grid",
-        ),
         pytest.param(
             ["train", "{data}", "--out", "{out}", "--device", "cuda"],
             "sees no CUDA GPU",
@@ -241,10 +217,68 @@ def test_errors_before_work(app, tiny_dataset, tmp_path, args, message):
     assert bad.read_text() == "[train]\nlearning_rate = 0.1\n"  # nor overwritten
 
 
-def test_the_cli_names_every_preset_and_classical_baseline():
-    """The CLI's lists (kept import-free so --help stays fast) match the modules they mirror."""
+def test_the_cli_names_every_classical_baseline():
+    """The CLI's list (kept import-free so --help stays fast) matches the module it mirrors."""
     from learn import cli
-    from learn.classical import CLASSICAL
-    from learn.config import PRESET_OF_ARCH
+    from learn.classical.svm import CLASSICAL
 
-    assert cli.PRESETS == tuple(PRESET_OF_ARCH) and cli.CLASSICAL == tuple(CLASSICAL)
+    assert cli.CLASSICAL == tuple(CLASSICAL)
+
+
+def _digest(folder) -> dict:
+    import hashlib
+
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.iterdir())}
+
+
+def test_a_run_folder_is_never_written_over(app, tiny_dataset, tiny_writer, small_config, tmp_path):
+    """best.pt without last.pt is refused by a fresh start and by --resume, nothing changed;
+    --resume on an empty folder says it starts afresh; --resume on other data is refused,
+    naming both."""
+    base = ["train", str(tiny_dataset), "--config", str(small_config), "--no-progress"]
+    run = tmp_path / "run"
+    res = runner.invoke(app, [*base, "--out", str(run), "--resume", "--epochs", "1"])
+    assert res.exit_code == 0 and "holds no last.pt, so a new run starts there" in res.output
+    (run / "last.pt").unlink()
+    before = _digest(run)
+    for extra in ([], ["--resume"]):
+        res = runner.invoke(app, [*base, "--out", str(run), *extra])
+        assert res.exit_code == 2 and "holds best.pt but no last.pt" in res.output, res.output
+        assert "Fix: move it away first" in res.output and _digest(run) == before
+    other = tiny_writer(tmp_path / "other", list(range(0, 48, 2)))
+    run2 = tmp_path / "run2"
+    res = runner.invoke(app, [*base, "--out", str(run2), "--stop-after-epoch", "1"])
+    assert res.exit_code == 0, res.output
+    before = _digest(run2)
+    resumed = ["train", str(other), "--config", str(small_config), "--out", str(run2), "--resume"]
+    res = runner.invoke(app, resumed)
+    assert res.exit_code == 2 and str(tiny_dataset) in res.output and str(other) in res.output
+    assert _digest(run2) == before
+
+
+def test_one_class_training_data_is_refused(app, tiny_writer, small_config, tmp_path):
+    only_objects = tiny_writer(tmp_path / "objects", list(range(24, 48)))
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["train", str(only_objects), "--out", str(out), "--no-progress"])
+    assert res.exit_code == 2 and "holds non_hand only" in res.output, res.output
+    assert not out.exists()
+
+
+def test_unreadable_images_in_a_folder_are_skipped_and_listed(app, small_config, tmp_path):
+    from PIL import Image
+
+    rng = np.random.default_rng(0)
+    for cls in ("hand", "other"):
+        (tmp_path / "imgs" / cls).mkdir(parents=True)
+        for k in range(12):
+            img = (rng.random((28, 50)) * 255).astype(np.uint8)
+            Image.fromarray(img).save(tmp_path / "imgs" / cls / f"{k}.png")
+    (tmp_path / "imgs" / "hand" / "notes.png").write_text("not an image")
+    whole = (tmp_path / "imgs" / "other" / "0.png").read_bytes()
+    (tmp_path / "imgs" / "other" / "cut.png").write_bytes(whole[: len(whole) // 2])
+    out = tmp_path / "run"
+    args = ["train", str(tmp_path / "imgs"), "--out", str(out), "--config", str(small_config)]
+    res = runner.invoke(app, [*args, "--epochs", "1", "--no-progress"])
+    assert res.exit_code == 0, res.output
+    assert "2 of 26 image files" in res.output and "notes.png" in res.output
+    assert "cut.png" in res.output

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from learn.curves import history_figure, plot_history
+from learn.train.curves import history_figure, plot_history
 
 
 def test_plot_history(tmp_path):

@@ -7,7 +7,7 @@ import pytest
 import torch
 from torch.utils.data import DataLoader
 
-from learn.data import FaultSpec, TorchTactileDataset
+from learn.data.dataset import FaultSpec, TorchTactileDataset
 from tactile import TactileMap, TaxelLayout, resize_image, resize_labels
 from tactile.dataset import DatasetWriter, open_dataset
 from tactile.errors import ConfigError, DataError

@@ -1,10 +1,9 @@
-"""--pretrain-encoder (a segmenter's default on a handskin dataset): a vgg16 classifier trained
-first into OUT/vgg16 starts the segmenter's encoder; its recipe is the one docs/learning.md
-measured; --no-pretrain-encoder trains from scratch; bad combinations are refused first."""
+"""The encoder start (a segmenter's default on a handskin dataset): a vgg16 classifier trained
+first into OUT/vgg16 starts the segmenter's encoder; its recipe is the documented one;
+--from-scratch trains from scratch."""
 
 from __future__ import annotations
 
-import pytest
 import torch
 import typer
 from typer.testing import CliRunner
@@ -24,7 +23,7 @@ def test_the_classifier_is_the_documented_recipe(tmp_path):
     """The classifier's run equals the one docs/learning.md trained by hand: the vgg16 preset
     with `epochs = 20, lr_drop_period_epochs = 14` in a run TOML (here at seed 3)."""
     from learn.cli import resolve_run
-    from learn.encoder_start import encoder_run
+    from learn.train.encoder import encoder_run
 
     toml = tmp_path / "vgg.toml"
     toml.write_text("[train]\nepochs = 20\nlr_drop_period_epochs = 14\nseed = 3\n")
@@ -56,7 +55,7 @@ def test_the_segmenter_starts_from_the_classifier_trained_first(tiny_dataset, tm
             "segnet",
             "--config",
             config,
-            "--no-pretrain-encoder",
+            "--from-scratch",
         ]
     )
     assert res.exit_code == 0, res.output
@@ -72,7 +71,7 @@ def test_the_segmenter_starts_from_the_classifier_trained_first(tiny_dataset, tm
     assert res.exit_code == 0, res.output
     assert (out / "vgg16" / "best.pt").stat().st_mtime_ns == stamp
     assert torch.load(out / "last.pt", weights_only=False)["epoch"] == 2  # epochs done
-    # a run from scratch resumes from scratch by default, and refuses the encoder
+    # a run from scratch resumes from scratch, as it started
     scratch_args = [
         tiny_dataset,
         "--out",
@@ -83,50 +82,23 @@ def test_the_segmenter_starts_from_the_classifier_trained_first(tiny_dataset, tm
         config,
         "--resume",
     ]
-    res = _train([*scratch_args, "--pretrain-encoder"])
-    assert res.exit_code != 0 and "--no-pretrain-encoder" in res.output, res.output
     res = _train(scratch_args)
     assert res.exit_code == 0, res.output
     assert not (tmp_path / "scratch" / "vgg16").exists()
 
 
-@pytest.mark.parametrize(
-    ("args", "message"),
-    [
-        (["--arch", "handsnet"], "starts a segmenter"),
-        (["--arch", "segnet", "--init", "CKPT"], "give one of the two"),
-        (["--arch", "segnet", "--cv-grid", "train.lr=0.01,0.001"], "would not be held out"),
-        (["--arch", "bovw"], "does not apply to --arch bovw"),
-    ],
-)
-def test_bad_combinations_are_refused_before_any_work(
-    tiny_dataset, checkpoints, tmp_path, args, message
-):
-    args = [str(checkpoints["segnet"]) if a == "CKPT" else a for a in args]
-    out = tmp_path / "run"
-    res = _train([tiny_dataset, "--out", out, *args, "--pretrain-encoder"])
-    assert res.exit_code != 0 and message in res.output, res.output
-    assert not out.exists()
-
-
-def test_an_image_folder_is_refused_and_not_pretrained_by_default(tiny_dataset, tmp_path):
+def test_the_encoder_start_applies_to_segmenters_on_a_dataset_only(tiny_dataset, tmp_path):
+    """By default a segmenter on a handskin dataset; not with --from-scratch, a classifier, a
+    start of its own (--init), a cross-validation, or an image folder."""
     from learn.cli import resolve_run
-    from learn.encoder_start import check_pretrain, wanted
-    from tactile.errors import ConfigError
+    from learn.train.encoder import wanted
 
     (tmp_path / "imgs").mkdir()
-    seg = resolve_run("segnet", None, {}, False)
-    with pytest.raises(ConfigError, match="needs a handskin dataset"):
-        check_pretrain(seg, tmp_path / "imgs", None, None)
-    assert not wanted(None, seg, tmp_path / "imgs", None, None, tmp_path / "o", False)
-    assert wanted(None, seg, tiny_dataset, None, None, tmp_path / "o", False)
-    assert not wanted(None, seg, tiny_dataset, tmp_path / "x.pt", None, tmp_path / "o", False)
-    assert not wanted(
-        None,
-        resolve_run("handsnet", None, {}, False),
-        tiny_dataset,
-        None,
-        None,
-        tmp_path / "o",
-        False,
-    )
+    seg, out = resolve_run("segnet", None, {}, False), tmp_path / "o"
+    assert wanted(False, seg, tiny_dataset, None, None, out, False)
+    assert not wanted(True, seg, tiny_dataset, None, None, out, False)
+    assert not wanted(False, seg, tmp_path / "imgs", None, None, out, False)
+    assert not wanted(False, seg, tiny_dataset, tmp_path / "x.pt", None, out, False)
+    assert not wanted(False, seg, tiny_dataset, None, "train.lr=0.1,0.01", out, False)
+    handsnet = resolve_run("handsnet", None, {}, False)
+    assert not wanted(False, handsnet, tiny_dataset, None, None, out, False)

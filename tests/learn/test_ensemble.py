@@ -12,14 +12,14 @@ import torch
 import typer
 from typer.testing import CliRunner
 
-from learn.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
 from learn.cli import register
-from learn.ensemble import MeanSoftmax, load_members
-from learn.evaluate import evaluate_ensemble
-from learn.folder import materialize, open_split
-from learn.predict import load_predictor
-from learn.train import fit, load_data
-from learn.tta import flip_view
+from learn.data.load import load_data, materialize, open_split
+from learn.evaluate.scoring import Job, evaluate_job
+from learn.infer.ensemble import MeanSoftmax, load_members
+from learn.infer.predict import load_predictor
+from learn.inputs import flip_view
+from learn.train.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
+from learn.train.loop import fit
 from tactile.errors import ConfigError
 
 
@@ -104,7 +104,7 @@ def test_evaluate_ensemble_matches_a_numpy_reference(checkpoints, tiny_dataset, 
     )
     differs = dict.fromkeys(paths, False)
     for tta, views in ((False, (0,)), (True, (0, 1, 2))):
-        row = evaluate_ensemble(paths, tiny_dataset, time_runs=2, tta=tta)
+        row = evaluate_job(Job(tuple(paths), tta=tta), tiny_dataset, time_runs=2)
         pred = numpy_mean_softmax(paths, test.x, views).argmax(1)
         pred[test.x[:, 0].numpy() == 0] = 0
         truth = test.y.numpy()
@@ -129,12 +129,11 @@ def test_cli_evaluate_and_predict_with_an_ensemble(checkpoints, fcn, tiny_datase
     md = tmp_path / "r.md"
     args = [
         "evaluate",
+        str(tiny_dataset),
         str(checkpoints["handsnet"]),
         str(checkpoints["segnet"]),
         str(fcn),
-        "--data",
-        str(tiny_dataset),
-        "--report",
+        "--out",
         str(md),
         "--ensemble",
     ]
@@ -143,18 +142,17 @@ def test_cli_evaluate_and_predict_with_an_ensemble(checkpoints, fcn, tiny_datase
     rows = json.loads(md.with_suffix(".json").read_text())
     assert [r["arch"] for r in rows] == ["handsnet", "segnet", "fcn16s", "ensemble"]
     text = md.read_text()
-    assert "| mean of SegNet + FCN |" in text and "Ensemble: scores and times" in text
+    assert "| Ensemble (SegNet + FCN) |" in text and f"- member `{fcn}`" in text
     # One network per task: nothing to average, refused before any report is written.
     md2 = tmp_path / "r2.md"
     res = CliRunner().invoke(
         app,
         [
             "evaluate",
+            str(tiny_dataset),
             str(checkpoints["handsnet"]),
             str(checkpoints["segnet"]),
-            "--data",
-            str(tiny_dataset),
-            "--report",
+            "--out",
             str(md2),
             "--ensemble",
         ],
@@ -173,9 +171,8 @@ def test_cli_evaluate_and_predict_with_an_ensemble(checkpoints, fcn, tiny_datase
         app,
         [
             "predict",
-            "--data",
             str(tiny_dataset),
-            "--index",
+            "--sample",
             "3",
             "--segmenter",
             str(checkpoints["segnet"]),
@@ -190,9 +187,8 @@ def test_cli_evaluate_and_predict_with_an_ensemble(checkpoints, fcn, tiny_datase
         app,
         [
             "predict",
-            "--data",
             str(tiny_dataset),
-            "--index",
+            "--sample",
             "3",
             "--segmenter",
             str(checkpoints["segnet"]),

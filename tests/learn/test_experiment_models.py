@@ -1,13 +1,16 @@
-"""Experiment models: trained once, reused only when the configuration matches."""
+"""Models trained once (``learn.train.runs``): reused only when the configuration matches,
+wherever they trained; a stopped run is resumed."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from learn.checkpoint import load_checkpoint
-from learn.experiments.models import ensure_model, preset_run
-from learn.train import fit, load_data
+from learn.config import preset_run
+from learn.data.load import load_data
+from learn.train.checkpoint import load_checkpoint, save_checkpoint
+from learn.train.loop import fit
+from learn.train.runs import ensure_model
 from tactile.errors import ConfigError
 
 
@@ -41,3 +44,18 @@ def test_a_stopped_run_resumes_instead_of_being_reused(tiny_dataset, tmp_path):
     stamp = resumed.stat().st_mtime_ns  # finished now: reused as it is
     again = ensure_model("handsnet", tiny_dataset, tmp_path / "a", epochs=2, progress=False)
     assert again == resumed and resumed.stat().st_mtime_ns == stamp
+
+
+def test_a_network_trained_on_a_gpu_is_reused_on_the_cpu(tiny_dataset, tmp_path):
+    """A models folder filled on a GPU machine serves a CPU rerun as it is; any other change of
+    configuration is still refused."""
+    first = ensure_model("handsnet", tiny_dataset, tmp_path, epochs=1, progress=False)
+    for path in (first, first.parent / "last.pt"):  # as a run with --device cuda:0 writes them
+        ckpt = load_checkpoint(path)
+        ckpt["config"]["device"] = "cuda:0"
+        save_checkpoint(ckpt, path)
+    stamp = first.stat().st_mtime_ns
+    assert ensure_model("handsnet", tiny_dataset, tmp_path, epochs=1, progress=False) == first
+    assert first.stat().st_mtime_ns == stamp
+    with pytest.raises(ConfigError, match="another configuration"):
+        ensure_model("handsnet", tiny_dataset, tmp_path, epochs=2, progress=False)

@@ -7,9 +7,9 @@ import pytest
 import torch
 from torch import nn
 
-from learn.evaluate import scored_fast_path
-from learn.fastpath import clear_disagreements, fast_inference
-from learn.folder import TensorData
+from learn.data.load import TensorData
+from learn.evaluate.scoring import scored_fast_path
+from learn.infer.fastpath import clear_disagreements, fast_inference
 from learn.models import create_model
 
 

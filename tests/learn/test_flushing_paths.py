@@ -11,14 +11,14 @@ import pytest
 import torch
 from torch import nn
 
-from learn.evaluate import evaluate_tensors
-from learn.folder import TensorData
-from learn.metrics import time_per_image
+from learn.classical.vgg_svm import extract_features
+from learn.data.load import TensorData, load_data
+from learn.infer.fastpath import time_per_image
+from learn.infer.predict import Predictor
+from learn.infer.quantize import int8_supported, quantize_int8
 from learn.models import create_model
-from learn.predict import Predictor
-from learn.quantize import int8_supported, quantize_int8
-from learn.train import fit, load_data
-from learn.vgg_svm import extract_features
+from learn.train.loop import fit
+from learn.train.validation import evaluate_tensors
 
 from .conftest import SIZE, make_run
 

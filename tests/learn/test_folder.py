@@ -8,10 +8,11 @@ import pytest
 import torch
 from PIL import Image
 
-from learn.config import ModelConfig, TrainConfig
-from learn.evaluate import evaluate_tensors
-from learn.folder import FolderDataset, read_label_png
-from learn.train import RunConfig, fit, load_data
+from learn.config import ModelConfig, RunConfig, TrainConfig
+from learn.data.folder import FolderDataset, read_label_png
+from learn.data.load import load_data
+from learn.train.loop import fit
+from learn.train.validation import evaluate_tensors
 from tactile.errors import DataError
 from tactile.labels import PALETTE, colorize
 

@@ -9,12 +9,12 @@ import torch
 from torch import nn
 
 from learn import config as C
-from learn.checkpoint import inputs_stale, make_checkpoint, model_from_checkpoint
-from learn.evaluate import evaluate_tensors
-from learn.folder import TensorData
+from learn.config import RunConfig
+from learn.data.load import TensorData
 from learn.inputs import INPUTS, net_input, unpressed_as_background
 from learn.models import create_model
-from learn.train import RunConfig
+from learn.train.checkpoint import inputs_stale, make_checkpoint, model_from_checkpoint
+from learn.train.validation import evaluate_tensors
 from tactile.config import to_dict
 from tactile.errors import DataError
 

@@ -11,12 +11,12 @@ import torch
 import typer
 from typer.testing import CliRunner
 
-from learn.checkpoint import load_checkpoint, model_from_checkpoint
 from learn.cli import register
-from learn.evaluate import evaluate_checkpoint
-from learn.int8_file import INT8_KEY, int8_from_saved, is_int8
-from learn.predict import load_predictor, read_sample
-from learn.quantize import calibration_images, int8_supported, quantize_int8
+from learn.evaluate.scoring import Job, evaluate_job
+from learn.infer.int8_file import calibration_images, int8_from_saved
+from learn.infer.predict import load_predictor, read_sample
+from learn.infer.quantize import int8_supported, quantize_int8
+from learn.train.checkpoint import INT8_KEY, is_int8, load_checkpoint, model_from_checkpoint
 from tactile.errors import ConfigError, DataError
 
 pytestmark = pytest.mark.skipif(
@@ -70,15 +70,13 @@ def test_evaluate_scores_the_file_as_int8(checkpoints, tiny_dataset, int8_file, 
     float checkpoint, the report saying where its ranges came from."""
     app, runner = _app()
     md = tmp_path / "r.md"
-    res = runner.invoke(
-        app, ["evaluate", str(int8_file), "--data", str(tiny_dataset), "--report", str(md)]
-    )
+    res = runner.invoke(app, ["evaluate", str(tiny_dataset), str(int8_file), "--out", str(md)])
     assert res.exit_code == 0, res.output
     (row,) = json.loads(md.with_suffix(".json").read_text())
     assert row["int8"]["saved"] and row["int8"]["calibration_data"] == str(tiny_dataset)
-    direct = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3, int8=True)
+    direct = evaluate_job(Job((checkpoints["handsnet"],), int8=True), tiny_dataset, time_runs=3)
     assert row["cm"] == direct["cm"]
-    assert "| HandsNet int8" in md.read_text() and "saved by handskin quantize" in md.read_text()
+    assert "| HandsNet, int8" in md.read_text() and "saved by handskin quantize" in md.read_text()
 
 
 def test_bad_input_refused(checkpoints, tiny_dataset, int8_file, tmp_path):
@@ -108,9 +106,8 @@ def test_bad_input_refused(checkpoints, tiny_dataset, int8_file, tmp_path):
         (
             [
                 "predict",
-                "--data",
                 str(tiny_dataset),
-                "--index",
+                "--sample",
                 "3",
                 "--classifier",
                 str(int8_file),
@@ -123,12 +120,11 @@ def test_bad_input_refused(checkpoints, tiny_dataset, int8_file, tmp_path):
         (
             [
                 "evaluate",
+                str(tiny_dataset),
                 str(int8_file),
                 hn,
-                "--data",
-                str(tiny_dataset),
                 "--ensemble",
-                "--report",
+                "--out",
                 str(tmp_path / "e.md"),
             ],
             "an ensemble averages float networks",
@@ -136,11 +132,10 @@ def test_bad_input_refused(checkpoints, tiny_dataset, int8_file, tmp_path):
         (
             [
                 "evaluate",
-                str(int8_file),
-                "--data",
                 str(tiny_dataset),
+                str(int8_file),
                 "--int8",
-                "--report",
+                "--out",
                 str(tmp_path / "e.md"),
             ],
             "scored as int8 without it",

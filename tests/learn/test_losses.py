@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from learn.losses import (
+from learn.config import LOSSES
+from learn.train.losses import (
     SegmentationLoss,
     class_pixel_counts,
     median_frequency_weights,
@@ -64,7 +65,7 @@ def test_soft_dice_bounds_and_gradient():
 def test_segmentation_loss_by_name():
     logits = torch.randn(1, 3, 4, 4)
     target = torch.randint(0, 3, (1, 4, 4))
-    for name in SegmentationLoss.NAMES:
+    for name in LOSSES:
         weights = [1.0, 2.0, 3.0] if name == "weighted_ce" else None
         assert SegmentationLoss(name, weights)(logits, target).ndim == 0
     with pytest.raises(ConfigError, match="choose one of"):
@@ -96,36 +97,3 @@ def test_ce_dice_is_the_sum_of_mean_nll_and_soft_dice_by_loops():
     assert (
         start.grad[:, 1:][torch.nn.functional.one_hot(target[:1], 3).movedim(-1, 1)[:, 1:] > 0] < 0
     ).all()
-
-
-@pytest.mark.parametrize("soft", [False, True])
-def test_label_smoothing_matches_its_definition_in_numpy(soft):
-    """CE against (1 - eps) q + eps / C, q the one-hot target (or mixup's probabilities)."""
-    rng = np.random.default_rng(4)
-    logits = rng.normal(size=(6, 3))
-    ids = rng.integers(0, 3, 6)
-    q = np.eye(3)[ids]
-    if soft:
-        lam = 0.3
-        q = lam * q + (1 - lam) * np.eye(3)[rng.integers(0, 3, 6)]
-    eps = 0.1
-    logp = logits - np.log(np.exp(logits).sum(1, keepdims=True))
-    expected = -(((1 - eps) * q + eps / 3) * logp).sum(1).mean()
-    target = torch.tensor(q, dtype=torch.float64) if soft else torch.tensor(ids)
-    got = SegmentationLoss("ce", None, eps)(torch.tensor(logits), target)
-    assert got.item() == pytest.approx(expected, rel=1e-12)
-
-
-def test_label_smoothing_is_refused_for_dice_and_out_of_range():
-    from learn.config import TrainConfig
-
-    for bad in (-0.1, 1.0):
-        with pytest.raises(ConfigError, match="label_smoothing"):
-            TrainConfig(label_smoothing=bad)
-        with pytest.raises(ConfigError, match="label_smoothing"):
-            SegmentationLoss("ce", None, bad)
-    with pytest.raises(ConfigError, match=r"not loss 'dice'.*Fix"):
-        TrainConfig(loss="dice", label_smoothing=0.1)
-    with pytest.raises(ConfigError, match="cross-entropy"):
-        SegmentationLoss("generalized_dice", None, 0.1)
-    TrainConfig(loss="ce_dice", label_smoothing=0.1)  # its CE term is smoothed

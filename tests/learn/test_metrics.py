@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from torch import nn
 
 from learn.metrics import (
     accuracy,
@@ -15,11 +14,9 @@ from learn.metrics import (
     frequency_weighted_iou,
     mean_class_accuracy,
     mean_iou,
-    merge_classes,
     percent_by_true_class,
     pixel_accuracy,
     segmentation_scores,
-    time_per_image,
     without_true_class,
 )
 from tactile.errors import DataError
@@ -91,29 +88,6 @@ def test_ignore_index_and_bad_input():
     with pytest.raises(DataError, match="target"):
         confusion_matrix(torch.zeros(3), torch.zeros(4), 2)
     assert math.isnan(accuracy(torch.zeros(2, 2)))
-
-
-def test_time_per_image_is_positive_and_leaves_eval_mode():
-    model = nn.Sequential(nn.Conv2d(1, 2, 3), nn.Flatten())
-    seconds = time_per_image(model, (12, 10), "cpu", n_warmup=2, n_runs=5)
-    assert 0 < seconds < 1
-    assert not model.training
-
-
-def test_merged_classes_equal_relabelled_predictions():
-    """Merging classes of a confusion matrix equals relabelling truth and prediction first."""
-    rng = np.random.default_rng(3)
-    truth, pred = rng.integers(0, 7, 5000), rng.integers(0, 7, 5000)
-    groups = [[0], [1], [2, 5], [3, 4], [6]]
-    relabel = np.zeros(7, np.int64)
-    for a, g in enumerate(groups):
-        relabel[g] = a
-    want = np.zeros((5, 5), np.int64)
-    np.add.at(want, (relabel[truth], relabel[pred]), 1)
-    cm = confusion_matrix(torch.from_numpy(truth), torch.from_numpy(pred), 7)
-    np.testing.assert_array_equal(merge_classes(cm, groups).numpy(), want)
-    with pytest.raises(DataError, match="once"):
-        merge_classes(cm, [[0, 1], [1, 2, 3, 4, 5, 6]])
 
 
 @pytest.mark.parametrize("seed", range(10))

@@ -9,26 +9,20 @@ import pytest
 import torch
 from torch import nn
 
+from learn.classical.vgg_svm import VggSvmClassifier, extract_features
 from learn.config import FINETUNE_TEST_C, VggSvmConfig
-from learn.finetune import (
-    load_weights,
-    lr_at_epoch,
-    lr_factors_by_parameter,
-    param_groups,
-    setup_finetuning,
-)
-from learn.models import (
-    MODELS,
-    FCN16s,
-    HandsNet,
-    VGGEncoder,
-    count_parameters,
-    create_model,
-    load_vgg_weights,
-    prepare_for_inference,
-)
+from learn.models import MODELS, count_parameters, create_model, prepare_for_inference
 from learn.models.blocks import VGG16_STAGES, scaled
-from learn.vgg_svm import VggSvmClassifier, extract_features
+from learn.models.fcn import FCN16s
+from learn.models.handsnet import HandsNet
+from learn.models.vgg import VGGEncoder, load_vgg_weights
+from learn.train.optim import (
+    load_weights,
+    lr_factors_by_parameter,
+    make_optimizer,
+    make_scheduler,
+    param_groups,
+)
 from tactile.errors import ConfigError, DataError
 
 ARCHS = sorted(MODELS)
@@ -123,30 +117,6 @@ def test_handsnet_zero_init_output_starts_every_image_at_even_odds():
         for n, p in model.named_parameters()
         if n.endswith("weight") and not n.startswith("classifier.7")
     )
-
-
-def test_handsnet_dropout_scale_multiplies_the_papers_rates_and_keeps_the_layers():
-    from learn.config import ModelConfig
-
-    paper = HandsNet()
-    for k in (0.0, 0.5):
-        model = create_model("handsnet", **ModelConfig("handsnet", dropout_scale=k).kwargs())
-        drops = [m.p for m in model.modules() if isinstance(m, nn.Dropout)]
-        assert drops == pytest.approx([0.1 * k, 0.2 * k, 0.6 * k, 0.5 * k])
-        assert [(n, t.shape) for n, t in model.state_dict().items()] == [
-            (n, t.shape) for n, t in paper.state_dict().items()
-        ]  # one checkpoint format
-    # with no dropout, a training-mode pass with batch norm frozen draws nothing: it equals eval
-    model = HandsNet(dropout_scale=0.0).eval()
-    for m in model.modules():
-        m.train(isinstance(m, nn.Dropout))
-    x = torch.rand(3, 1, 68, 100)
-    torch.testing.assert_close(model(x), model.eval()(x))
-    for bad, arch in ((1 / 0.6, "handsnet"), (-0.1, "handsnet"), (0.5, "vgg16")):
-        with pytest.raises(ConfigError, match="dropout_scale"):
-            ModelConfig(arch, dropout_scale=bad)
-    with pytest.raises(ConfigError, match="dropout_scale"):
-        HandsNet(dropout_scale=2.0)
 
 
 def test_vgg16_layout_at_full_width():
@@ -328,9 +298,15 @@ def test_load_weights_across_architectures_and_class_counts(tmp_path):
         load_weights(other, {"model": {"a": 1}})
 
 
+def lr_at_epoch(epoch: int, lr_factor: float = 1.0, cfg=FINETUNE_TEST_C) -> float:
+    """The step schedule in closed form: lr x factor x drop ** (epoch // period)."""
+    return cfg.lr * lr_factor * cfg.lr_drop_factor ** (epoch // cfg.lr_drop_period_epochs)
+
+
 def test_test_c_param_groups_and_schedule():
     model = HandsNet()
-    optimizer, scheduler, _ = setup_finetuning(model, model.state_dict(), FINETUNE_TEST_C)
+    optimizer = make_optimizer(model, FINETUNE_TEST_C)
+    scheduler = make_scheduler(optimizer, FINETUNE_TEST_C)
     by_factor = {g["lr_factor"]: g for g in optimizer.param_groups}
     assert by_factor[0.1]["lr"] == pytest.approx(0.001) and by_factor[1.0]["lr"] == 0.01
     convs = [m for m in model.modules() if isinstance(m, nn.Conv2d)]
@@ -339,11 +315,11 @@ def test_test_c_param_groups_and_schedule():
     assert sum(len(g["params"]) for g in optimizer.param_groups) == len(list(model.parameters()))
     for epoch in range(FINETUNE_TEST_C.epochs):
         for group in optimizer.param_groups:
-            expected = lr_at_epoch(FINETUNE_TEST_C, epoch, group["lr_factor"])
+            expected = lr_at_epoch(epoch, group["lr_factor"])
             assert group["lr"] == pytest.approx(expected)
         optimizer.step()
         scheduler.step()
-    assert lr_at_epoch(FINETUNE_TEST_C, 60) == pytest.approx(0.005)
+    assert lr_at_epoch(60) == pytest.approx(0.005)
 
 
 def test_lr_factor_selectors():

@@ -10,19 +10,13 @@ import pytest
 import torch
 from torch import nn
 
-from learn import train as T
-from learn.checkpoint import load_checkpoint, model_from_checkpoint
 from learn.cli import resolve_run
-from learn.folder import TensorData
-from learn.train import (
-    RunConfig,
-    build,
-    check_precision,
-    fit,
-    load_data,
-    load_run_config,
-    train_step,
-)
+from learn.config import RunConfig, load_run_config, run_from_dict
+from learn.data.load import TensorData, load_data
+from learn.train import device
+from learn.train.checkpoint import load_checkpoint, model_from_checkpoint
+from learn.train.device import check_precision
+from learn.train.loop import build, fit, make_loss, train_step
 from tactile.errors import ConfigError
 
 
@@ -45,12 +39,14 @@ def test_bf16_step_computes_convolutions_in_bf16_and_keeps_weights_fp32(tiny_run
     run = tiny_run(arch)
     x, y = batch(run)
     for precision, dtype in (("fp32", torch.float32), ("bf16", torch.bfloat16)):
-        model, optimizer, _, _ = build(run)
-        loss_fn = T.make_loss(run, TensorData(x, y))
+        model, optimizer, _ = build(run)
+        loss_fn = make_loss(run, TensorData(x, y))
         seen: list[torch.dtype] = []
         conv = next(m for m in model.modules() if isinstance(m, nn.Conv2d))
         conv.register_forward_hook(lambda _m, _i, out, seen=seen: seen.append(out.dtype))
-        loss = train_step(model, loss_fn, optimizer, x, y, run.task, precision)
+        loss = train_step(
+            model, loss_fn, optimizer, x, y, dataclasses.replace(run, precision=precision)
+        )
         assert seen == [dtype]
         assert all(p.dtype == torch.float32 for p in model.parameters())
         assert all(torch.isfinite(p.grad).all() for p in model.parameters() if p.grad is not None)
@@ -65,20 +61,20 @@ def test_bf16_gradients_follow_fp32(tiny_dataset, checkpoints):
     Not SegNet here: at the tests' width (0.125) and 4 epochs its per-layer gradients differ by
     much more (cosine 0.2-0.5 in the encoder; 1-3 % of the max-unpooling indices flip between
     near-equal maxima), against 0.986 overall on the paper-sized checkpoint (width 0.25, 30
-    epochs). Whether bf16 trains SegNet as well is a training run's question (docs/learning.md,
-    "bfloat16 training")."""
+    epochs). Whether bf16 trains SegNet as well is a training run's question."""
     ckpt = load_checkpoint(checkpoints["handsnet"])
-    run = T.run_from_dict(ckpt["config"])
+    run = run_from_dict(ckpt["config"])
     data = load_data(tiny_dataset, run).train
     x, y = data.x[:8], data.y[:8]
-    loss_fn = T.make_loss(run, data)
+    loss_fn = make_loss(run, data)
     grads, losses = {}, {}
     for precision in ("fp32", "bf16"):
         model, _ = model_from_checkpoint(ckpt)
         model.train()
         optimizer = torch.optim.SGD(model.parameters(), lr=0.0)
         torch.manual_seed(0)  # the same dropout masks
-        losses[precision] = train_step(model, loss_fn, optimizer, x, y, run.task, precision)
+        step_run = dataclasses.replace(run, precision=precision)
+        losses[precision] = train_step(model, loss_fn, optimizer, x, y, step_run)
         grads[precision] = torch.cat([p.grad.flatten() for p in model.parameters()])
     cos = nn.functional.cosine_similarity(grads["fp32"], grads["bf16"], dim=0).item()
     assert cos > 0.95, cos
@@ -95,14 +91,14 @@ def test_bf16_training_fits_one_batch(tiny_run, arch):
         cells = y[:, ::16, ::16].repeat_interleave(16, 1).repeat_interleave(16, 2)
         y = cells[:, : x.shape[2], : x.shape[3]]
         x = y[:, None].float() / run.model.num_classes
-    model, optimizer, _, _ = build(run)
+    model, optimizer, _ = build(run)
     for m in model.modules():
         if isinstance(m, nn.Dropout | nn.Dropout2d):
             m.p = 0.0
-    loss_fn = T.make_loss(run, TensorData(x, y))
+    loss_fn = make_loss(run, TensorData(x, y))
     target = 1.0 if run.task == "classify" else 0.95
     for _ in range(150):
-        train_step(model, loss_fn, optimizer, x, y, run.task, "bf16")
+        train_step(model, loss_fn, optimizer, x, y, dataclasses.replace(run, precision="bf16"))
         with torch.no_grad(), torch.autocast("cpu", dtype=torch.bfloat16):
             acc = (model(x).argmax(1) == y).float().mean().item()  # batch statistics, as trained
         if acc >= target:
@@ -122,17 +118,17 @@ def test_precision_settings(tmp_path, tiny_dataset, tiny_run, monkeypatch):
     assert over == {"precision": "bf16", "epochs": 2, "val_fraction": 0.2, "lr": None}
     assert resolve_run("segnet", toml, {}, False).precision == "bf16"
     run = dataclasses.replace(tiny_run("handsnet", epochs=1), precision="bf16")
-    monkeypatch.setattr(T, "bf16_supported", lambda: False)
+    monkeypatch.setattr(device, "bf16_supported", lambda: False)
     with pytest.raises(ConfigError, match=r"AVX512-BF16 or AMX.*Fix"):
-        check_precision(run)
+        check_precision(run.device, run.precision)
     with pytest.raises(ConfigError, match="native bfloat16"):
         fit(run, load_data(tiny_dataset, run), tmp_path / "run", progress=False)
     assert not (tmp_path / "run").exists()  # refused before any work
-    check_precision(dataclasses.replace(run, precision="fp32"))
+    check_precision(run.device, "fp32")
 
 
 def test_resume_refuses_another_precision(tiny_dataset, tiny_run, tmp_path, monkeypatch):
-    monkeypatch.setattr(T, "bf16_supported", lambda: True)  # any CPU: the check comes later
+    monkeypatch.setattr(device, "bf16_supported", lambda: True)  # any CPU: the check comes later
     run = tiny_run("handsnet", epochs=2)
     data = load_data(tiny_dataset, run)
     fit(run, data, tmp_path / "cut", progress=False, stop_after_epoch=1)
@@ -152,7 +148,7 @@ def test_bf16_support_means_native_bf16_on_x86():
     import platform
     from pathlib import Path
 
-    from learn.fastpath import bf16_supported
+    from learn.train.device import bf16_supported
 
     cpuinfo = Path("/proc/cpuinfo")
     if platform.machine().lower() not in ("x86_64", "amd64") or not cpuinfo.exists():

@@ -13,7 +13,7 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from learn.cli import register
-from learn.predict import (
+from learn.infer.predict import (
     Prediction,
     Predictor,
     attach_taxels,
@@ -162,9 +162,8 @@ def test_predict_command_end_to_end_and_view_hand_off(checkpoints, tiny_dataset,
     png, labels = tmp_path / "fig" / "pred.png", tmp_path / "pred33.npy"
     args = [
         "predict",
-        "--data",
         str(tiny_dataset),
-        "--index",
+        "--sample",
         "3",
         "--classifier",
         str(checkpoints["handsnet"]),
@@ -172,7 +171,7 @@ def test_predict_command_end_to_end_and_view_hand_off(checkpoints, tiny_dataset,
         str(checkpoints["segnet"]),
         "--png",
         str(png),
-        "--save-labels",
+        "--out",
         str(labels),
     ]
     res = CliRunner().invoke(app, args)
@@ -198,36 +197,30 @@ def test_predict_command_end_to_end_and_view_hand_off(checkpoints, tiny_dataset,
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--data", "{data}", "--segmenter", "{seg}"], "--data and --index go together"),
-        (["--data", "{data}", "--index", "99", "--segmenter", "{seg}"], "out of range"),
+        (["{data}", "--segmenter", "{seg}"], "--sample N goes with a dataset folder"),
+        (["{data}", "--sample", "99", "--segmenter", "{seg}"], "--sample 99 is out of range"),
+        (["{png}", "--sample", "0", "--segmenter", "{seg}"], "--sample N goes with a dataset"),
+        (["{png}", "--segmenter", "{seg}", "--out", "{out}/l.npy"], "--out writes per-taxel"),
         (
-            ["--image", "{seg}", "--segmenter", "{seg}", "--save-labels", "{out}/l.npy"],
-            "an image alone has no taxels",
+            ["{data}", "--sample", "0", "--classifier", "{seg}", "--out", "{out}/l.npy"],
+            "it needs --segmenter",
         ),
-        (
-            [
-                "--data",
-                "{data}",
-                "--index",
-                "0",
-                "--classifier",
-                "{seg}",
-                "--save-labels",
-                "{out}/l.npy",
-            ],
-            "--save-labels needs --segmenter",
-        ),
-        (["--data", "{data}", "--index", "0", "--segmenter", "{out}/none.pt"], "no checkpoint"),
-        (
-            ["--frame", "{seg}", "--data", "{data}", "--index", "0", "--segmenter", "{seg}"],
-            "give one input",
-        ),
+        (["{data}", "--sample", "0", "--segmenter", "{out}/none.pt"], "no checkpoint"),
+        (["{frame}", "--segmenter", "{seg}"], "--map goes with a taxel frame"),
+        (["{out}/none.csv", "--segmenter", "{seg}"], "no dataset folder or file"),
+        (["{seg}", "--segmenter", "{seg}"], "or a frame (.csv, .npy)"),
+        (["{data}", "--sample", "0"], "give --classifier, --segmenter or both"),
+        (["{data}", "--sample", "0", "--segmenter", "{seg}", "--int8"], "give --classifier"),
     ],
 )
 def test_predict_command_errors_before_work(checkpoints, tiny_dataset, tmp_path, args, message):
     app = typer.Typer()
     register(app)
+    png, frame = tmp_path / "image.png", tmp_path / "frame.csv"
+    png.write_bytes(b"")
+    frame.write_text("0, 1, 2\n")
     fill = {"data": tiny_dataset, "seg": checkpoints["segnet"], "out": tmp_path / "out"}
+    fill |= {"png": png, "frame": frame}
     res = CliRunner().invoke(app, ["predict", *[a.format(**fill) for a in args]])
     assert res.exit_code == 2 and message in res.output, res.output
     assert not (tmp_path / "out").exists()

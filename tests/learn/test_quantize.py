@@ -12,12 +12,13 @@ import torch
 import typer
 from typer.testing import CliRunner
 
-from learn.checkpoint import load_checkpoint, model_from_checkpoint
 from learn.cli import register
-from learn.evaluate import evaluate_checkpoint
-from learn.folder import materialize, open_split
+from learn.data.load import materialize, open_split
+from learn.evaluate.scoring import Job, evaluate_job
+from learn.infer.int8_file import calibration_images
+from learn.infer.quantize import MIN_CALIBRATION, int8_supported, quantize_int8
 from learn.models import create_model
-from learn.quantize import MIN_CALIBRATION, calibration_images, int8_supported, quantize_int8
+from learn.train.checkpoint import load_checkpoint, model_from_checkpoint
 from tactile.errors import ConfigError
 
 pytestmark = pytest.mark.skipif(
@@ -120,29 +121,13 @@ def test_evaluate_int8_row(checkpoints, tiny_dataset, tmp_path):
     md = tmp_path / "r.md"
     res = runner.invoke(
         app,
-        [
-            "evaluate",
-            str(checkpoints["segnet"]),
-            "--data",
-            str(tiny_dataset),
-            "--report",
-            str(md),
-            "--int8",
-        ],
+        ["evaluate", str(tiny_dataset), str(checkpoints["segnet"]), "--out", str(md), "--int8"],
     )
     assert res.exit_code == 2 and "no float HandsNet checkpoint" in res.output, res.output
     assert not md.exists()
     res = runner.invoke(
         app,
-        [
-            "evaluate",
-            str(checkpoints["handsnet"]),
-            "--data",
-            str(tiny_dataset),
-            "--report",
-            str(md),
-            "--int8",
-        ],
+        ["evaluate", str(tiny_dataset), str(checkpoints["handsnet"]), "--out", str(md), "--int8"],
     )
     assert res.exit_code == 0, res.output
     rows = json.loads(md.with_suffix(".json").read_text())
@@ -150,12 +135,12 @@ def test_evaluate_int8_row(checkpoints, tiny_dataset, tmp_path):
     assert plain["int8"] is None and q["int8"]["backend"] == "onednn"
     n_train = len(open_split(tiny_dataset, "train", "classify", (32, 48), None, 0))
     assert q["int8"]["calibration_images"] == min(n_train, 512)
-    assert q["n_test"] == plain["n_test"] and q["test_indices"] == plain["test_indices"]
+    assert q["n_test"] == plain["n_test"]
     table = md.read_text().split("## Hand / non-hand")[1].split("##")[0]
     lines = [ln for ln in table.splitlines() if ln.startswith("| HandsNet")]
-    assert [ln.split(" | ")[0] for ln in lines] == ["| HandsNet", "| HandsNet int8"]
+    assert [ln.split(" | ")[0] for ln in lines] == ["| HandsNet", "| HandsNet, int8"]
     assert "int8 (onednn; activation ranges from" in md.read_text()
-    direct = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3, int8=True)
+    direct = evaluate_job(Job((checkpoints["handsnet"],), int8=True), tiny_dataset, time_runs=3)
     assert direct["cm"] == q["cm"]  # calibration drawn by the run's seed: the same network
 
 
@@ -164,7 +149,7 @@ def test_predict_int8(checkpoints, tiny_dataset, tmp_path):
     (calibrated on the checkpoint's training data by default, or on ``--calibration``), so its
     probability for a sample is that network's softmax; bad combinations and a missing
     calibration set are refused before any picture is written."""
-    from learn.predict import load_predictor, read_sample
+    from learn.infer.predict import load_predictor, read_sample
 
     app = typer.Typer()
     register(app)
@@ -172,7 +157,7 @@ def test_predict_int8(checkpoints, tiny_dataset, tmp_path):
     hn = str(checkpoints["handsnet"])
     png = tmp_path / "p.png"
     # sample 33: a non-hand whose float and int8 probabilities differ (0.822 / 0.833)
-    base = ["predict", "--data", str(tiny_dataset), "--index", "33", "--png", str(png)]
+    base = ["predict", str(tiny_dataset), "--sample", "33", "--png", str(png)]
     for extra, message in (
         (["--classifier", hn, "--calibration", str(tiny_dataset)], "add --int8"),
         (["--segmenter", str(checkpoints["segnet"]), "--int8"], "give --classifier"),

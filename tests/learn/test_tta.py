@@ -12,12 +12,13 @@ import typer
 from torch import nn
 from typer.testing import CliRunner
 
-from learn.checkpoint import load_checkpoint, save_checkpoint
 from learn.cli import register
-from learn.evaluate import evaluate_checkpoint
+from learn.evaluate.scoring import Job, evaluate_job
+from learn.infer.ensemble import FlipTTA
+from learn.infer.predict import load_predictor
+from learn.inputs import VIEW_DIMS, flip_view
 from learn.models import create_model
-from learn.predict import load_predictor
-from learn.tta import VIEW_DIMS, FlipTTA, flip_array, flip_view
+from learn.train.checkpoint import load_checkpoint, save_checkpoint
 
 SIZE = (32, 40)
 
@@ -81,7 +82,7 @@ def test_numpy_and_torch_flips_agree_with_index_reversal(view):
     for shape in ((5, 7), (2, 5, 7)):
         a = np.arange(np.prod(shape)).reshape(shape)
         want = a[..., :: -1 if rev_rows else 1, :][..., :: -1 if rev_cols else 1]
-        np.testing.assert_array_equal(flip_array(a, view), want)
+        np.testing.assert_array_equal(flip_view(a, view), want)
         np.testing.assert_array_equal(flip_view(torch.from_numpy(a), view).numpy(), want)
 
 
@@ -102,13 +103,13 @@ def test_evaluate_with_test_time_flips(checkpoints, tiny_dataset, tmp_path):
     """`handskin evaluate --tta`: a second row per network, scored with the flips; its
     confusion matrix is the slow reference's; a network trained without flips is refused before
     any report is written."""
-    from learn.checkpoint import model_from_checkpoint
-    from learn.folder import materialize, open_split
+    from learn.data.load import materialize, open_split
     from learn.metrics import confusion_matrix
+    from learn.train.checkpoint import model_from_checkpoint
 
     # HandsNet: SegNet's unpooling breaks max-pool ties by batch layout, which moves near-tied
     # pixels of a barely trained net; the classifier's decision does not depend on the batch
-    row = evaluate_checkpoint(checkpoints["handsnet"], tiny_dataset, time_runs=3, tta=True)
+    row = evaluate_job(Job((checkpoints["handsnet"],), tta=True), tiny_dataset, time_runs=3)
     assert row["tta_views"] == [0, 1, 2] and row["ms_per_image"]["fast"] > 0
     model, run = model_from_checkpoint(load_checkpoint(checkpoints["handsnet"]))
     test = materialize(
@@ -124,11 +125,10 @@ def test_evaluate_with_test_time_flips(checkpoints, tiny_dataset, tmp_path):
     md = tmp_path / "r.md"
     args = [
         "evaluate",
+        str(tiny_dataset),
         str(checkpoints["handsnet"]),
         str(checkpoints["segnet"]),
-        "--data",
-        str(tiny_dataset),
-        "--report",
+        "--out",
         str(md),
         "--tta",
     ]
@@ -142,19 +142,18 @@ def test_evaluate_with_test_time_flips(checkpoints, tiny_dataset, tmp_path):
         ("segnet", [0, 1, 2]),
     ]
     text = md.read_text()
-    assert "| HandsNet + test-time flips |" in text and "| SegNet + test-time flips |" in text
-    assert "run as one batch of 3 images" in text
+    assert "| HandsNet, flips |" in text and "| SegNet, flips |" in text
+    assert "Test-time flips: the mean softmax over views [0, 1, 2]." in text
     bad = without_flips(checkpoints["segnet"], tmp_path)
     md2 = tmp_path / "r2.md"
     res = CliRunner().invoke(
         app,
         [
             "evaluate",
+            str(tiny_dataset),
             str(checkpoints["handsnet"]),
             str(bad),
-            "--data",
-            str(tiny_dataset),
-            "--report",
+            "--out",
             str(md2),
             "--tta",
         ],

@@ -1,5 +1,5 @@
-"""Body-part contactors and the non-hand mixture: compile and press on the forearm, human-size
-ranges, determinism, primitives, soft tissue, press plans, mixture fractions."""
+"""Body-part contactors and the non-hand mixture: compile and press on the forearm, sizes of the
+surveyed people (ANSUR II), determinism, primitives, soft tissue, press plans, mixture fractions."""
 
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ from sim.nonhand import (
 )
 from sim.objects import HARD_NEGATIVES
 from sim.parts import get_part
+from sim.primitives import MATERIALS
 from tactile.errors import ConfigError
 
 BODY_SHAPES = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_ELLIPSOID)}
@@ -62,9 +63,10 @@ def test_capsules_and_ellipsoids_of_soft_tissue(kind: str) -> None:
     assert sorted(model.geom(i).name for i in range(model.ngeom)) == sorted(c.geom_labels)
     assert set(c.geom_labels.values()) == {0} and c.kind == "body" and c.subject_id == -1
     assert all(n.startswith("bp_") for n in c.geom_labels)
-    widths = c.description["stiffness"]["compliance_depth_m"].values()
-    assert all(0.006 <= w <= 0.025 for w in widths)
-    assert 1.0 <= c.description["mass_kg"] <= 4.5
+    for material, depth in c.description["stiffness"]["compliance_depth_m"].items():
+        assert material in ("soft_tissue", "thin_tissue")
+        assert MATERIALS[material][1][0] <= depth <= MATERIALS[material][1][1]
+    assert c.description["mass_kg"] > 0
     json.dumps(c.description)
 
 
@@ -75,33 +77,63 @@ def test_instances_are_deterministic(kind: str) -> None:
     assert build_body_part(kind, None, 12).description != a.description
 
 
-# Anthropometric ranges (ANSUR II, Gordon et al. 2014; see sim/bodyparts.py), metres.
-RANGES = {
-    "forearm": [
-        ("half_width", 0.038, 0.050),
-        ("wrist_radius", 0.022, 0.030),
-        ("length", 0.24, 0.29),
-    ],
-    "upper_arm": [("radius", 0.040, 0.058), ("length", 0.28, 0.36)],
-    "elbow": [("olecranon_half_width", 0.022, 0.028), ("flexion", np.deg2rad(60), np.deg2rad(120))],
-    "shoulder": [("deltoid_x", 0.055, 0.07), ("arm_radius", 0.040, 0.055)],
-    "chest": [("half_breadth", 0.135, 0.19), ("half_depth", 0.105, 0.15)],
-    "back": [("half_breadth", 0.135, 0.19), ("scapula_proud", 0.01, 0.02)],
-    "knee": [("patella_half_width", 0.0225, 0.0275), ("thigh_radius", 0.07, 0.10)],
-    "head": [
-        ("half_breadth", 0.07, 0.0825),
-        ("half_length", 0.09, 0.105),
-        ("half_height", 0.105, 0.12),
-    ],
+# ANSUR II (Gordon et al. 2014, "2012 Anthropometric Survey of U.S. Army Personnel: Methods and
+# Summary Statistics", NATICK/TR-15/007): 5th percentile of the 1,986 women and 95th of the 4,082
+# men, mm, as computed from the survey's public data. sim/bodyparts.py draws "roughly the
+# 5th-percentile woman to 95th-percentile man"; "roughly" is 5 % here, and a limb's radius (or
+# half-width) is its circumference / 2 pi.
+ANSUR_II_MM = {
+    "forearm circumference, flexed": (235, 348),
+    "wrist circumference": (142, 191),
+    "radiale-stylion length": (218, 295),  # forearm length
+    "biceps circumference, flexed": (259, 418),
+    "acromion-radiale length": (283, 365),  # upper arm length
+    "chest breadth": (241, 320),
+    "chest depth": (205, 298),
+    "lower thigh circumference": (347, 463),  # just above the knee
+    "thigh circumference": (527, 723),  # at the top of the thigh
+    "head breadth": (140, 163),
+    "head length": (178, 211),
 }
+TOLERANCE = 0.05
+RADIUS, HALF, LENGTH = 1 / (2 * np.pi), 0.5, 1.0  # mm of the measurement -> mm of the model
+CHEST_TOO_BROAD = pytest.mark.xfail(
+    strict=True,
+    reason="the trunk's half-breadth is drawn up to 190 mm: a 38 cm chest, wider than ANSUR II's "
+    "95th-percentile man (32.0 cm); changing it changes every dataset",
+)
 
 
-@pytest.mark.parametrize("kind", BODY_KINDS)
-def test_dimensions_within_anthropometric_ranges(kind: str) -> None:
+def row(kind: str, key: str, measures: tuple[str, str], scale: float, marks=()):
+    return pytest.param(kind, key, measures, scale, marks=marks, id=f"{kind}.{key}")
+
+
+ROWS = [  # (kind, dimension, ANSUR II measurement (low from, high from), mm -> model mm)
+    row("forearm", "half_width", ("forearm circumference, flexed",) * 2, RADIUS),
+    row("forearm", "wrist_radius", ("wrist circumference",) * 2, RADIUS),
+    row("forearm", "length", ("radiale-stylion length",) * 2, LENGTH),
+    row("upper_arm", "radius", ("biceps circumference, flexed",) * 2, RADIUS),
+    row("upper_arm", "length", ("acromion-radiale length",) * 2, LENGTH),
+    row("elbow", "arm_radius", ("biceps circumference, flexed",) * 2, RADIUS),
+    row("shoulder", "arm_radius", ("biceps circumference, flexed",) * 2, RADIUS),
+    row("chest", "half_breadth", ("chest breadth",) * 2, HALF, marks=CHEST_TOO_BROAD),
+    row("chest", "half_depth", ("chest depth",) * 2, HALF),
+    row("back", "half_breadth", ("chest breadth",) * 2, HALF, marks=CHEST_TOO_BROAD),
+    row("back", "half_depth", ("chest depth",) * 2, HALF),
+    # one capsule stands for a thigh tapering from its top to just above the knee
+    row("knee", "thigh_radius", ("lower thigh circumference", "thigh circumference"), RADIUS),
+    row("head", "half_breadth", ("head breadth",) * 2, HALF),
+    row("head", "half_length", ("head length",) * 2, HALF),
+]
+
+
+@pytest.mark.parametrize(("kind", "key", "measures", "scale"), ROWS)
+def test_dimensions_span_the_surveyed_people(kind, key, measures, scale):
+    lo = ANSUR_II_MM[measures[0]][0] * scale * (1 - TOLERANCE) / 1e3
+    hi = ANSUR_II_MM[measures[1]][1] * scale * (1 + TOLERANCE) / 1e3
     for i in range(30):
-        dims = build_body_part(kind, None, i).description["dimensions_m"]
-        for key, lo, hi in RANGES[kind]:
-            assert lo - 1e-5 <= dims[key] <= hi + 1e-5, (key, dims[key])
+        value = build_body_part(kind, None, i).description["dimensions_m"][key]
+        assert lo <= value <= hi, (i, value, (lo, hi))
 
 
 def test_body_press_plans_within_kind_forces() -> None:

@@ -131,3 +131,26 @@ def test_custom_part_on_the_real_baxter_w0(shared_data) -> None:
     assert np.linalg.norm(closest - part.layout.positions_m, axis=1).max() < 1e-4
     tmap = TactileMap.build(part.layout, step_mm=2.0)
     assert np.isfinite(tmap.uv).all()
+
+
+def test_part_command_writes_the_model_and_names_bad_flags(tmp_path):
+    """`handskin part plate --out DIR`: MJCF model and scene, link STL and a layout that loads back
+    as the part's; a bad --step-mm is refused naming the flag."""
+    import typer
+    from typer.testing import CliRunner
+
+    from sim.cli import register
+    from tactile.layout import TaxelLayout
+
+    app = typer.Typer()
+    register(app)
+    result = CliRunner().invoke(app, ["part", "plate", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    folder = tmp_path / "plate"
+    assert {p.name for p in folder.iterdir()} >= {"plate.xml", "scene.xml", "plate_link.stl"}
+    layout = TaxelLayout.load(folder / "plate_layout.npz")
+    assert np.array_equal(layout.positions_m, get_part("plate").layout.positions_m)
+    result = CliRunner().invoke(app, ["part", "plate", "--step-mm", "-1"])
+    assert result.exit_code == 2 and "--step-mm -1.0 is out of range" in result.output
+    result = CliRunner().invoke(app, ["probe", "--n-forces", "1"])
+    assert result.exit_code == 2 and "--n-forces 1 is out of range" in result.output

@@ -11,8 +11,9 @@ import typer
 from PIL import Image
 from typer.testing import CliRunner
 
+from sim.render import geom_mesh, render_scene
 from sim.tiny import tiny_config
-from sim.view import GeomShape, geom_mesh, render_scene, simulate_scene
+from sim.view import GeomShape, simulate_scene
 from sim.view_cli import register, simulated
 
 SIZE_PX = (320, 160)  # (width, height) of the test renders, pixels
@@ -71,7 +72,7 @@ def test_view_command_writes_pictures(tmp_path: Path):
         "view",
         "--part",
         "plate",
-        "--index",
+        "--sample",
         "2",
         "--color",
         "label",
@@ -106,7 +107,7 @@ def test_view_command_explains_a_missing_prediction(tmp_path: Path):
 
 
 def _view(tmp_path: Path, name: str, *extra: str) -> np.ndarray:
-    """`handskin view --part plate --index 2` (a hand) with ``extra`` options: the 3D picture."""
+    """`handskin view --part plate --sample 2` (a hand) with ``extra`` options: the 3D picture."""
     app = typer.Typer()
     register(app)
     app.callback()(lambda: None)
@@ -117,7 +118,7 @@ def _view(tmp_path: Path, name: str, *extra: str) -> np.ndarray:
             "view",
             "--part",
             "plate",
-            "--index",
+            "--sample",
             "2",
             "--width",
             "320",
@@ -133,7 +134,7 @@ def _view(tmp_path: Path, name: str, *extra: str) -> np.ndarray:
 
 
 def test_view_draws_per_taxel_labels_saved_by_predict(tmp_path: Path):
-    """The hand-off of `handskin predict --save-labels FILE.npy`: (N,) uint8 class ids colour
+    """The hand-off of `handskin predict ... --out FILE.npy`: (N,) uint8 class ids colour
     the skin. Labels equal to the truth draw what --color label draws (up to the caption);
     another labelling draws another skin."""
     labels = simulated("plate", 0, 2, False)[0].labels  # the sample the command draws
@@ -167,4 +168,22 @@ def test_view_explains_a_missing_labels_file(tmp_path: Path):
             str(tmp_path / "v.png"),
         ],
     )
-    assert result.exit_code == 2 and "--save-labels" in result.output, result.output
+    text = " ".join(result.output.split())
+    assert result.exit_code == 2 and "--pred" in text and "--out FILE.npy" in text, text
+
+
+def test_view_command_names_a_bad_sample(tmp_path: Path):
+    app = typer.Typer()
+    register(app)
+    app.callback()(lambda: None)
+    args = ["view", "--part", "plate", "--sample", "-1", "--png", str(tmp_path / "v.png")]
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2 and "--sample -1 out of range" in result.output
+    assert not (tmp_path / "v.png").exists()
+
+
+def test_the_command_offers_the_renderers_colours():
+    """`sim.view_cli` spells the colour choices out (importing `sim.render` loads pyvista)."""
+    from sim import render, view_cli
+
+    assert view_cli.COLORS == render.COLORS

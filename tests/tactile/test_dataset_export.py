@@ -89,9 +89,11 @@ def app() -> typer.Typer:
 
 def test_cli_export_and_ingest(tmp_path, dataset):
     runner = CliRunner()
-    result = runner.invoke(app(), ["export", str(dataset), "--png", str(tmp_path / "png")])
+    args = ["export", str(dataset), "--out", str(tmp_path / "png"), "--no-progress"]
+    result = runner.invoke(app(), args)
     assert result.exit_code == 0, result.output
     assert "hand       3 PNG files" in result.output
+    assert len(list((tmp_path / "png" / "hand").glob("*.png"))) == 3
     layout, _ = cylinder_sector_layout(width_mm=50, length_mm=70, pitch_mm=8)
     layout.save(tmp_path / "layout.csv")
     frames = np.random.default_rng(0).integers(0, 500, (4, layout.n_taxels))
@@ -116,8 +118,11 @@ def test_cli_export_and_ingest(tmp_path, dataset):
 
 def test_cli_errors_and_units_in_help(tmp_path):
     runner = CliRunner()
-    result = runner.invoke(app(), ["export", str(tmp_path / "none"), "--png", str(tmp_path)])
+    result = runner.invoke(app(), ["export", str(tmp_path / "none"), "--out", str(tmp_path)])
     assert result.exit_code == 2 and "no dataset at" in result.output
+    args = ["ingest", "layout.csv", "frames.npy", "--out", str(tmp_path / "o"), "--step-mm", "0"]
+    result = runner.invoke(app(), args)
+    assert result.exit_code == 2 and "--step-mm 0.0 is out of range" in result.output
     result = runner.invoke(app(), ["ingest", "--help"], terminal_width=200)
     text = " ".join(result.output.replace("│", " ").split())
     for unit in ("mm/pixel", "counts/Pa", "raw 16-bit counts", "unitless"):

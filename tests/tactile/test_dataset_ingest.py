@@ -111,6 +111,7 @@ def test_taxel_frames_without_baseline(tmp_path, recording):
     np.testing.assert_array_equal(ds.image[:], tmap.image(frames))
     np.testing.assert_allclose(ds.pressure_pa[:], frames / 2.0)
     assert ds.attrs["skin_counts_per_pa"] == 2.0 and "is_hand" not in ds.fields
+    assert ds.active_threshold_pa == 0.0  # a recording has no generation threshold
 
 
 def test_npy_and_csv_frames_give_the_same_dataset(tmp_path, recording):

@@ -124,6 +124,22 @@ def test_round_trip_equals_what_was_written(tmp_path, part):
     assert "numpy" in ds.attrs["versions"] and "mujoco" in ds.attrs["versions"]
 
 
+@pytest.mark.parametrize(
+    ("config", "want_pa"),
+    [
+        ({"episode": {"active_pa": 612.5}}, 612.5),  # a synthetic dataset's generation config
+        ({"episodes": 20}, 0.0),  # no threshold recorded
+        ({"episode": {"active_pa": "high"}}, 0.0),  # not a number
+    ],
+)
+def test_active_threshold_is_the_configs_active_pa(tmp_path, part, config, want_pa):
+    w = writer(tmp_path / "ds", part, config)
+    w.write_chunk(0, [make_sample(part[1], i) for i in range(3)])
+    w.merge()
+    with open_dataset(tmp_path / "ds") as ds:
+        assert ds.active_threshold_pa == want_pa
+
+
 def test_field_access_info_and_pickle(tmp_path, part):
     write_all(tmp_path / "ds", part).merge()
     ds = open_dataset(tmp_path / "ds")
