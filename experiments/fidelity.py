@@ -26,6 +26,7 @@ import numpy as np
 from experiments import experiment
 from experiments import fidelity_settings as FS
 from experiments import options as O
+from experiments.fidelity_prints import print_statistics
 from experiments.fidelity_report import write_report
 from experiments.report import Report
 from learn.config import preset_run
@@ -193,6 +194,8 @@ def run_fidelity(
 
         check_device(plan.device)
     chosen = FS.resolve_settings(settings, quick)
+    if any(dict(s.changes).get("backend") == "warp" for s in chosen):
+        _check_warp()
     if base is None:
         check_part(part)
         base = GenerateConfig(part=part)
@@ -222,12 +225,22 @@ def run_fidelity(
         n_train = len(training_indices(folder, test_dir))
         row = {"name": setting.name, "note": setting.note, "knobs": FS.knob_values(cfg)}
         row |= {"changes": dict(setting.changes), "dataset": str(folder), "n_train": n_train}
-        row |= timings[setting.name] | {"miou_pct": None}
+        row |= timings[setting.name] | {"miou_pct": None, "prints": print_statistics(folder)}
         for a in archs:
             row[METRIC[a]] = score_setting(a, folder, test_dir, tests[a], out, plan, progress)
         rows.append(row)
     test = {"dataset": str(test_dir), "n_test": len(test_ids), **timings[FS.RICHEST]}
     return write_report(rep, rows, plan, probe_run("handsnet", plan).train, base.part, test)
+
+
+def _check_warp() -> None:
+    """ConfigError before any work when the warp setting cannot run here."""
+    from sim.warp_options import WarpOptions, check_warp  # start-up time: sim loads MuJoCo
+
+    try:
+        check_warp(WarpOptions())
+    except ConfigError as err:
+        raise ConfigError(f"setting warp: {err}; or leave warp out of --settings") from err
 
 
 SettingsOpt = O.opt(str | None, f"Settings to run, comma-separated, of {', '.join(FS.BY_NAME)}.")

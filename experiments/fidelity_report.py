@@ -7,6 +7,7 @@ import dataclasses
 import math
 
 from experiments import fidelity_settings as FS
+from experiments.fidelity_prints import prints_table, same_prints
 from experiments.report import markdown_table
 from learn.evaluate import paper
 
@@ -30,15 +31,18 @@ class Choice:
     tolerance_pt: float
 
 
-def choose_default(speeds, accs, n_test: int) -> Choice | None:
+def choose_default(speeds, accs, n_test: int, same_prints=None) -> Choice | None:
     """The fastest setting (samples per CPU-second) within ``tolerance_pt`` of the best
-    accuracy (%); None when no setting has both numbers (None = unknown)."""
+    accuracy (%) whose prints are the default's (``same_prints[i]``, all True when None); None
+    when no setting has both numbers (None = unknown)."""
+    same = same_prints or [True] * len(accs)
     ok = [i for i in range(len(accs)) if speeds[i] is not None and accs[i] is not None]
     if not ok:
         return None
     best = max(ok, key=lambda i: accs[i])
     tol = tolerance_pt(accs[best], n_test)
     near = [i for i in ok if accs[i] >= accs[best] - tol]
+    near = [i for i in near if same[i]] or near
     return Choice(max(near, key=lambda i: speeds[i]), best, tol)
 
 
@@ -112,7 +116,8 @@ def choice_text(rows: list[dict], choice: Choice | None, n_test: int) -> str:
     text = (
         "**Rule.** The default is the fastest setting (samples per CPU-second) whose HandsNet "
         f"accuracy on the shared test set is within max({MIN_TOL_PT:g} point, the 95 % binomial "
-        f"half-width of the best accuracy on {n_test} test samples) of the best.\n\n**Outcome.** "
+        f"half-width of the best accuracy on {n_test} test samples) of the best and whose prints "
+        "are the default's (table above).\n\n**Outcome.** "
     )
     if choice is None:
         return text + "unknown: no setting has both a measured speed and accuracy."
@@ -124,14 +129,26 @@ def choice_text(rows: list[dict], choice: Choice | None, n_test: int) -> str:
     )
 
 
+PRINTS_TEXT = (
+    "Mean of each statistic over the setting's samples of a contactor kind, with its 95 % "
+    "bootstrap interval (2,000 resamples of the samples); * marks a mean outside the default's "
+    "interval. A setting makes the default's prints when every mean lies inside; the rule below "
+    "only picks such a setting (when one is within its accuracy tolerance)."
+)
+
+
 def write_report(rep, rows: list[dict], plan, probe, part: str, test: dict) -> dict:
     """The protocol, the settings' table, the charts and the rule's choice into ``rep`` (a
     ``Report``; ``plan``: the ``FidelityPlan``, ``probe``: the HandsNet probe's TrainConfig);
     writes report.md and results.json and returns the results."""
     accs, n_test = [r["accuracy_pct"] for r in rows], test["n_test"]
-    choice = choose_default([r["per_core"] for r in rows], accs, n_test)
+    default = next((r for r in rows if r["name"] == FS.DEFAULT), None)
+    same = default and [same_prints(r["prints"], default["prints"]) for r in rows]
+    choice = choose_default([r["per_core"] for r in rows], accs, n_test, same)
     rep.section("Protocol", protocol_text(plan, probe, part, n_test))
     rep.section("Settings, speed and accuracy", settings_table(rows, plan.segmentation))
+    if default is not None:
+        rep.section("Prints", PRINTS_TEXT + "\n\n" + prints_table(rows, FS.DEFAULT))
     picked = None if choice is None else rows[choice.index]["name"]
     band = choice and (accs[choice.best] - choice.tolerance_pt, accs[choice.best])
     for key, net, metric, value, chosen in (

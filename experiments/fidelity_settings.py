@@ -16,6 +16,8 @@ base configuration, so a knob of `GenerateConfig` becomes a setting by one line 
   (hence the image) is the same as without it, so it is pure cost for a single-frame model.
 - ``hand_detail`` — "coarse" drops the palm's metacarpal and heel capsules (`sim.hand`).
 - ``episode.solver_iterations`` — MuJoCo's cap on solver iterations per step (default 100).
+- ``backend`` — "warp" steps the episodes as batched MuJoCo Warp worlds (float32, its own
+  collision and solver) on warp's default device instead of C MuJoCo.
 
 The richest setting (`RICHEST`) also gives the shared test set (its dataset's test split).
 """
@@ -60,6 +62,7 @@ SETTINGS: tuple[FidelitySetting, ...] = (
     S("default", {}, "GenerateConfig defaults"),
     S("sequences", {"keep_sequences": True}, "release simulated, 10 Hz sequence stored"),
     S("dt_2.5ms", {"episode.timestep_s": 0.0025}, "time step 2.5 ms"),
+    S("warp", {"backend": "warp"}, "MuJoCo Warp backend (batched worlds, float32)"),
     S("rich", {"episode.timestep_s": 0.001}, "time step 1 ms; gives the test set"),
 )
 BY_NAME: dict[str, FidelitySetting] = {s.name: s for s in SETTINGS}
@@ -74,6 +77,7 @@ KNOB_COLUMNS: tuple[tuple[str, str, float], ...] = (
     ("sequences kept", "keep_sequences", 1.0),
     ("solver iterations (cap)", "episode.solver_iterations", 1.0),
     ("hand detail", "hand_detail", 1.0),
+    ("backend", "backend", 1.0),
 )
 
 

@@ -13,6 +13,7 @@ import typer
 
 from learn.cli import DeviceOpt, ProgressOpt, SeedOpt, opt
 from tactile.errors import ConfigError, DataError, require_folder
+from tactile.files import require_writable
 
 __all__ = ["DeviceOpt", "ProgressOpt", "SeedOpt", "opt"]
 
@@ -46,10 +47,11 @@ def check_at_least(flag: str, value: int | None, least: int = 1) -> None:
 
 
 def check_out(out: Path, *others: tuple[str, Path | None]) -> None:
-    """The report folder and other output folders (flag, path) can be created."""
+    """The report folder and other output folders (flag, path) can be created and written."""
     for flag, path in (("--out", out), *others):
         if path is not None:
             require_folder(Path(path), flag)
+            require_writable(Path(path), flag, folder=True)
 
 
 def parse_list(flag: str, text: str | None, kind: type, skip: tuple[str, ...] = ()) -> tuple | None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import functools
 from typing import Annotated
 
 import typer
@@ -13,6 +15,9 @@ from sim.cli import register as register_sim
 from sim.view_cli import register as register_view
 from tactile.cli import register as register_tactile
 from tactile.dataset.cli import register as register_dataset
+from tactile.errors import HandskinError
+from tactile.files import os_error_text
+from tactile.stats_cli import register as register_stats
 
 app = typer.Typer(
     name="handskin",
@@ -43,11 +48,42 @@ for register in (
     register_tactile,
     register_sim,
     register_dataset,
+    register_stats,
     register_view,
     register_learn,
     register_experiments,
 ):
     register(app)
+
+
+def guarded(callback):
+    """``callback`` whose uncaught user errors (HandskinError) and system errors (OSError: full
+    disk, read-only disk, damaged file) print one ``error:`` line and exit 2, no traceback."""
+
+    @functools.wraps(callback)
+    def run(*args, **kwargs):
+        try:
+            return callback(*args, **kwargs)
+        except HandskinError as err:
+            typer.echo(f"error: {err}", err=True)
+            raise typer.Exit(2) from err
+        except OSError as err:
+            if err.errno == errno.EPIPE:  # stdout closed (`| head`): click ends quietly
+                raise
+            typer.echo(f"error: {os_error_text(err)}", err=True)
+            raise typer.Exit(2) from err
+
+    return run
+
+
+def _guard_all(typer_app: typer.Typer) -> None:
+    for info in typer_app.registered_commands:
+        info.callback = guarded(info.callback)
+    for group in typer_app.registered_groups:
+        _guard_all(group.typer_instance)
+
+
+_guard_all(app)
 
 
 def main() -> None:

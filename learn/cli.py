@@ -1,4 +1,4 @@
-"""`handskin train`, `evaluate`, `predict` and `quantize` (``register(app)`` adds them).
+"""`handskin train`, `evaluate`, `predict`, `stream` and `quantize` (``register(app)`` adds them).
 
 Every input is checked (files exist, configuration valid, architecture known) before any work;
 errors print ``error: <what and how to fix>`` and exit with status 2. The modules that need
@@ -22,7 +22,14 @@ import typer
 
 from learn import config as C
 from tactile.config import to_dict
-from tactile.errors import ConfigError, DataError, HandskinError, require_folder
+from tactile.errors import (
+    ConfigError,
+    DataError,
+    HandskinError,
+    require_folder,
+    require_positive,
+)
+from tactile.files import atomic_path, os_error_text, require_writable, write_text_atomic
 
 CLASSICAL = ("bovw", "vgg_svm")  # as learn.classical.svm.CLASSICAL (not imported: fast --help)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
@@ -132,7 +139,7 @@ def train_command(
     data: DataArg,
     out: opt(Path, "Run folder: best.pt, last.pt, curves.png, run.toml, test_metrics.json."),
     arch: opt(
-        str, "handsnet | vgg16 | segnet | fcn16s, or the baselines bovw | vgg_svm."
+        str, "handsnet | vgg16 | segnet | fcn16s | action_tcn | action_3d, or bovw | vgg_svm."
     ) = "handsnet",
     config: opt(
         Path | None, "TOML run config laid over the arch's preset (docs/learning.md)."
@@ -166,6 +173,7 @@ def train_command(
     try:
         _check_data(data)
         require_folder(out)
+        require_writable(out, "--out", folder=True)
         if arch in CLASSICAL:
             network_only = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction}
             network_only |= {"--precision": precision, "--device": device, "--test-c": test_c}
@@ -196,6 +204,8 @@ def train_command(
         )
     except (HandskinError, KeyError) as err:
         raise fail(err) from err
+    except OSError as err:  # a full disk while writing the run folder
+        raise fail(ValueError(os_error_text(err))) from err
 
 
 def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress, scratch) -> None:
@@ -219,8 +229,7 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
             "--stop-after-epoch with --cv-grid: cross-validate first, then train the pick"
         )
     check_stop(stop, run, out, resume)
-    if note := check_run_folder(out, resume, data):
-        typer.echo(note)
+    check_run_folder(out, resume, data)
     if pretrain:  # every check passed: now the classifier, then its encoder as the start
         typer.echo(f"{run.model.arch}: first a vgg16 classifier in {out / encoder.FOLDER}")
         init = encoder.pretrain_encoder(run, data, out, progress)
@@ -228,12 +237,12 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
     if cv_grid:
         cv = cross_validate(run, data, parse_grid(cv_grid), k=cv_folds, hand_classes=hand)
         out.mkdir(parents=True, exist_ok=True)
-        (out / "crossval.md").write_text(cv_markdown(cv) + "\n")
+        write_text_atomic(out / "crossval.md", cv_markdown(cv) + "\n")
         typer.echo(cv_markdown(cv))
         run = cv.best_run
     loaded = load_data(data, run, hand_classes=hand, progress=progress)
     n = len(loaded.class_names)
-    if run.task == "classify" and n != run.model.num_classes:  # an image folder's classes
+    if run.task != "segment" and n != run.model.num_classes:  # a folder's classes, actions
         typer.echo(f"num_classes set to {n} ({', '.join(loaded.class_names)})")
         run = dataclasses.replace(run, model=dataclasses.replace(run.model, num_classes=n))
     result = fit(
@@ -248,7 +257,7 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
         res = evaluate_tensors(result.model, loaded.test, run.model.num_classes)
         report |= {"test_metrics": res.metrics, "test_confusion": res.cm.tolist()}
         typer.echo("test: " + ", ".join(f"{k} {v:.4f}" for k, v in res.metrics.items()))
-    (out / "test_metrics.json").write_text(json.dumps(report, indent=1))
+    write_text_atomic(out / "test_metrics.json", json.dumps(report, indent=1))
     typer.echo(f"run written to {out}")
 
 
@@ -307,6 +316,7 @@ def evaluate_command(
         check_timing(time_runs, time_rounds, threads)
         _check_data(data)
         require_folder(out.parent, "--out", "give a file path in a folder")
+        require_writable(out, "--out")
         models = [c for c in checkpoints if c.suffix == ".npz"]
         for m in models:
             load_npz(m)
@@ -320,8 +330,11 @@ def evaluate_command(
     words += ["--threads", str(threads), "--time-runs", str(time_runs)]
     words += ["--time-rounds", str(time_rounds)] + (["--hand-classes", hand_names] if hand else [])
     header = f"Regenerate: `{shlex.join(words)}`\n\nVersions: {json.dumps(versions())}."
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_report(rows, out, header)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_report(rows, out, header)
+    except OSError as err:
+        raise fail(ValueError(os_error_text(err))) from err
     typer.echo(f"report written to {out}")
 
 
@@ -365,6 +378,10 @@ def predict_command(
         kind = _check_predict(source, sample, map_, classifier, segmenter, out, int8, calibration)
         if threshold_pa is not None and not threshold_pa >= 0:
             raise ConfigError(f"--threshold-pa {threshold_pa}: give a pressure >= 0 Pa")
+        require_positive("--step-mm", step_mm, "mm/pixel")
+        for flag, path in (("--out", out), ("--png", png)):
+            if path is not None:
+                require_writable(path, flag)
         loaded = None if kind != "dataset" else P.read_sample(source, sample)
         if loaded is not None and threshold_pa is not None:
             loaded = dataclasses.replace(loaded, threshold_pa=threshold_pa)
@@ -384,18 +401,96 @@ def predict_command(
         typer.echo(f"class {pred.class_name} (probability {pred.probability:.4f})")
     for name, s in (pred.parts or {}).items():
         typer.echo(f"{name:7s} {s.n_taxels:5d} taxels, mean pressure {s.mean_pressure:.4g} Pa")
+    _echo_contacts(pred)
+    try:
+        _write_prediction(P, pred, out, png, seg and segmenter)
+    except OSError as err:  # a full disk; each file is written whole or not at all
+        raise fail(ValueError(os_error_text(err))) from err
+
+
+def _echo_contacts(pred) -> None:
+    """One line per separate contact when a frame holds several: its taxels and hand parts."""
+    n = int(pred.contacts.max(initial=0)) if pred.contacts is not None else 0
+    for k in range(1, n + 1) if n > 1 else ():
+        taxels = int((pred.contacts == k).sum())
+        parts = (pred.contact_parts or [{}] * n)[k - 1]
+        pressed = ", ".join(f"{name} {s.n_taxels}" for name, s in parts.items() if s.n_taxels)
+        typer.echo(f"contact {k}: {taxels} taxels" + (f"; {pressed}" if pressed else ""))
+
+
+def _write_prediction(P, pred, out: Path | None, png: Path | None, segmenter) -> None:
+    """Write ``handskin predict``'s per-taxel labels (.npy) and figures, each atomically."""
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
-        np.save(out, pred.taxel_labels.astype(np.uint8))
+        with atomic_path(out, keep_suffix=True) as tmp:
+            np.save(tmp, pred.taxel_labels.astype(np.uint8))
         typer.echo(f"per-taxel labels written to {out}")
     if png is not None:
-        name = (
-            "predicted"
-            if seg is None
-            else f"predicted ({' + '.join(p.parent.name for p in segmenter)})"
-        )
-        for path in P.save_figures(pred, png, name):
+        name = f"predicted ({' + '.join(p.parent.name for p in segmenter)})" if segmenter else ""
+        for path in P.save_figures(pred, png, name or "predicted"):
             typer.echo(f"picture written to {path}")
+
+
+def stream_command(
+    map_: opt(
+        Path, "The skin's dataset (frames are raw counts) or layout file (frames in Pa).", "--map"
+    ),
+    classifier: ClfOpt = None,
+    segmenter: SegOpt = None,
+    zmq: opt(str | None, "Read frames from this ZeroMQ address (PULL, bound), not stdin.") = None,
+    zmq_out: opt(
+        str | None, "Send answers to this ZeroMQ address (PUSH, bound), not stdout."
+    ) = None,
+    period_ms: opt(
+        float, "Frame period, ms: an answer later than this after its frame is late."
+    ) = 100.0,
+    latest: opt(
+        bool, "Of the frames waiting, answer the newest; the others count as dropped.", "--latest"
+    ) = False,
+    labels: opt(bool, "Per-taxel labels in each answer.", "--labels/--no-labels") = True,
+    int8: opt(bool, "The classifier (HandsNet) as int8.", "--int8") = False,
+    calibration: opt(
+        Path | None, "For --int8: data whose train split sets the 8-bit ranges."
+    ) = None,
+    bf16: opt(
+        bool,
+        "The segmenter's weights in bfloat16 (AVX512-BF16, AMX): faster, near ties change.",
+        "--bf16",
+    ) = False,
+    compile_nets: opt(
+        bool,
+        "Compile the networks but int8 for single frames (TorchInductor, seconds).",
+        "--compile",
+    ) = False,
+    threshold_pa: opt(float, "Per-part counts take taxels above this pressure, Pa.") = 0.0,
+    step_mm: opt(float, "Grid step of a map built from a layout file, mm/pixel.") = 1.0,
+    threads: ThreadsOpt = 1,
+) -> None:
+    """Recognise a stream of frames: one JSON answer per frame (docs/learning.md, Stream)."""
+    from learn.infer import serve as S  # optional: torch (the learn extra)
+
+    try:
+        for path in [*(classifier or ()), *(segmenter or ())]:
+            if not path.is_file():
+                raise DataError(
+                    f"no checkpoint at {path}. Fix: give a .pt file from handskin train"
+                )
+        rec, decode = S.load_recognizer(
+            map_,
+            classifier and _one(classifier),
+            segmenter and _one(segmenter),
+            int8,
+            calibration,
+            compile_nets,
+            bf16,
+            threshold_pa,
+            step_mm,
+            threads,
+        )
+        stats = S.run_stream(rec, decode, S.StreamOptions(zmq, zmq_out, period_ms, latest, labels))
+    except (HandskinError, KeyError) as err:
+        raise fail(err) from err
+    typer.echo(stats.summary(), err=True)
 
 
 def _one(paths: list[Path]) -> Path | list[Path]:
@@ -482,6 +577,7 @@ def quantize_command(
             raise ConfigError(f"--out {out}: name the int8 file with a .pt suffix")
         if out.exists() and not is_int8(load_checkpoint(out)):
             raise ConfigError(f"--out {out} holds a float checkpoint; it is not written over")
+        require_writable(out, "--out")
         where = F.calibration_source(ckpt, calibration)
         hand = (ckpt.get("data") or {}).get("hand_classes")
         calib = F.calibration_images(where, run, hand and tuple(hand), images)
@@ -490,7 +586,10 @@ def quantize_command(
         raise fail(err) from err
     with torch.no_grad():
         agree = float((model(calib).argmax(1) == net(calib).argmax(1)).float().mean())
-    save_checkpoint(F.int8_checkpoint(ckpt, net, where, len(calib), checkpoint), out)
+    try:
+        save_checkpoint(F.int8_checkpoint(ckpt, net, where, len(calib), checkpoint), out)
+    except HandskinError as err:  # a full disk: no temporary file is left
+        raise fail(err) from err
     size = run.model.input_size
     ms_float = cpu_ms_per_image(prepare_for_inference(model), size, 1, 50)
     ms_int8 = cpu_ms_per_image(net, size, 1, 50)
@@ -502,11 +601,12 @@ def quantize_command(
 
 
 def register(app: typer.Typer) -> None:
-    """Add `train`, `evaluate`, `predict` and `quantize` to the `handskin` app."""
+    """Add `train`, `evaluate`, `predict`, `stream` and `quantize` to the `handskin` app."""
     for name, command in (
         ("train", train_command),
         ("evaluate", evaluate_command),
         ("predict", predict_command),
+        ("stream", stream_command),
         ("quantize", quantize_command),
     ):
         app.command(name)(needs_torch(command))

@@ -24,6 +24,8 @@ TASK_OF_ARCH = {
     "vgg16": "classify",
     "segnet": "segment",
     "fcn16s": "segment",
+    "action_tcn": "action",  # the action of a press from its sequence (learn.models.action)
+    "action_3d": "action",
 }
 OPTIMIZERS = ("sgdm", "adam", "adamw")
 LOSSES = ("ce", "weighted_ce", "dice", "generalized_dice", "ce_dice")
@@ -57,8 +59,9 @@ def _require(ok: bool, message: str) -> None:
 class ModelConfig:
     """Which network to build (``learn.models.create_model``) and its size."""
 
-    arch: str = "handsnet"  # handsnet, vgg16 (classifiers), segnet, fcn16s (segmenters)
-    num_classes: int = 2  # 2 = hand / non-hand; 7 = background + 5 fingers + palm
+    # handsnet, vgg16 (classifiers), segnet, fcn16s (segmenters), action_tcn, action_3d (actions)
+    arch: str = "handsnet"
+    num_classes: int = 2  # 2 = hand / non-hand; 7 = background + 5 fingers + palm; 8 actions
     in_channels: int = 1  # tactile images are grey
     width: float | None = None  # channel multiplier (1.0 = VGG16's 64..512); None = model default
     input_size: tuple[int, int] = (68, 100)  # (h, w) px: the paper's resized tactile image
@@ -182,14 +185,14 @@ class RunConfig:
             f"precision {self.precision!r} (--precision) is not a number format. Fix: fp32 or bf16",
         )
         _require(
-            not (self.task == "classify" and self.train.loss.endswith("dice")),
+            not (self.task != "segment" and self.train.loss.endswith("dice")),
             f"train.loss {self.train.loss!r} is for segmentation; a classifier takes ce or "
             "weighted_ce",
         )
 
     @property
     def task(self) -> str:
-        """``"classify"`` or ``"segment"``, from the architecture."""
+        """``"classify"``, ``"segment"`` or ``"action"``, from the architecture."""
         return TASK_OF_ARCH[self.model.arch]
 
 
@@ -269,8 +272,24 @@ SEGNET_GPU = RunConfig(
 #: Dice best for FCN; here Dice sat at background-only for its first epochs (docs/findings.md).
 FCN16S = dataclasses.replace(SEGNET, model=ModelConfig("fcn16s", 7, width=0.25))
 
+#: The action networks (*ours*): 8 actions, frames at 34 x 50 px (HandsNet's pareto point),
+#: Adam at 1e-3, batch 32 sequences, 30 epochs with x 0.2 after 20 (docs/learning.md, Actions).
+ACTION_TCN = RunConfig(
+    ModelConfig("action_tcn", 8, width=0.5, input_size=(34, 50)),
+    TrainConfig(optimizer="adam", lr=0.001, lr_drop_period_epochs=20, batch_size=32, epochs=30),
+    eval_batch_size=32,
+)
+ACTION_3D = dataclasses.replace(ACTION_TCN, model=ModelConfig("action_3d", 8, input_size=(34, 50)))
+
 #: the preset of each network (``handskin train --arch``'s default configuration)
-PRESET_OF_ARCH = {"handsnet": HANDSNET, "vgg16": VGG16_FINETUNE, "segnet": SEGNET, "fcn16s": FCN16S}
+PRESET_OF_ARCH = {
+    "handsnet": HANDSNET,
+    "vgg16": VGG16_FINETUNE,
+    "segnet": SEGNET,
+    "fcn16s": FCN16S,
+    "action_tcn": ACTION_TCN,
+    "action_3d": ACTION_3D,
+}
 
 #: Fine-tuning of the paper's Test C: lr x 0.1 on the first two convolutions, lr 0.01 halved
 #: after 60 of 120 epochs, batch 128 (paper).
@@ -286,7 +305,7 @@ FINETUNE_TEST_C = TrainConfig(
 
 def metric_name(task: str) -> str:
     """The validation metric that selects the best epoch: accuracy or mean IoU."""
-    return "accuracy" if task == "classify" else "mean_iou"
+    return "mean_iou" if task == "segment" else "accuracy"
 
 
 def replace_train(run: RunConfig, **changes: object) -> RunConfig:

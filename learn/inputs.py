@@ -22,6 +22,40 @@ VIEW_DIMS: dict[int, tuple[int, ...]] = {0: (), 1: (-1,), 2: (-2,), 3: (-2, -1)}
 PAPER_VIEWS: tuple[int, ...] = (0, 1, 2)
 
 
+#: Class-name suffixes of mirror pairs (`mirror_classes`): a mirrored view turns a clockwise
+#: twist into a counter-clockwise one, a push to the left into one to the right.
+MIRROR_SUFFIXES: tuple[tuple[str, str], ...] = (("_cw", "_ccw"), ("_left", "_right"))
+
+
+def is_mirror(view: int) -> bool:
+    """True for a view that mirrors the map (one axis reversed), False for the original and the
+    180-degree turn, which keep the sense of turns and of left and right."""
+    return len(VIEW_DIMS[int(view)]) == 1
+
+
+def mirror_classes(names) -> np.ndarray | None:
+    """(C,) int64: the class each of ``names`` becomes in a mirrored view (`is_mirror`), the
+    mirror pairs found by `MIRROR_SUFFIXES` (``push_left`` and ``push_right``); None when every
+    class stays itself (hand / non-hand, hand parts)."""
+    names = list(names)
+    out = np.arange(len(names), dtype=np.int64)
+    for i, name in enumerate(names):
+        for a, b in MIRROR_SUFFIXES:
+            for mine, theirs in ((a, b), (b, a)):
+                if name.endswith(mine) and name[: -len(mine)] + theirs in names:
+                    out[i] = names.index(name[: -len(mine)] + theirs)
+    return None if (out == np.arange(len(names))).all() else out
+
+
+def targets_in_view(y, view: int, mirror=None):
+    """Targets ``y`` of images shown in view ``view``: label images (..., H, W) flipped as the
+    images are; class ids (S,) swapped to their mirror classes under a mirrored view when
+    ``mirror`` (`mirror_classes`, same array type as ``y``) is given, else unchanged."""
+    if y.ndim >= 2:
+        return flip_view(y, view)
+    return mirror[y] if mirror is not None and is_mirror(view) else y
+
+
 def flip_view(x, view: int):
     """``x`` (..., H, W), a numpy array (as a strided view, no copy) or a torch tensor, in view
     ``view`` (`VIEW_DIMS`); a flip is its own inverse."""

@@ -249,7 +249,7 @@ _SKIN_RGBA = (0.88, 0.7, 0.6, 1.0)
 
 def build_body_part(
     kind: str,
-    rng: np.random.Generator,
+    rng: np.random.Generator | None,
     instance_id: int | None = None,
 ) -> ContactorSpec:
     """Body-part contactor ``kind`` (one of `BODY_KINDS`), instance ``instance_id``.

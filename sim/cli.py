@@ -13,8 +13,10 @@ import numpy as np
 import typer
 
 from assets import ASSETS_DIR
+from sim.generate_cli import echo_warnings
 from sim.generate_cli import register as register_generate
 from tactile.errors import ConfigError, HandskinError, require_positive
+from tactile.files import require_writable, save_figure, staged
 from tactile.tactile_map import TactileMap
 
 # The sim modules load trimesh, MuJoCo or pyvista (0.5-2 s): they are imported inside the
@@ -32,6 +34,17 @@ def _fail(err: Exception) -> typer.Exit:
     text = err.args[0] if isinstance(err, KeyError) and err.args else err  # no repr quotes
     typer.echo(f"error: {text}", err=True)
     return typer.Exit(2)
+
+
+def check_views(views: str) -> tuple[str, ...]:
+    """``--views`` as a tuple of known view names; ConfigError listing them otherwise."""
+    from sim.pictures import VIEWS  # start-up: pyvista
+
+    names = tuple(v.strip() for v in views.split(",") if v.strip())
+    unknown = [v for v in names if v not in VIEWS]
+    if unknown or not names:
+        raise ConfigError(f"--views {views!r}: choose from {', '.join(VIEWS)} (comma-separated)")
+    return names
 
 
 def part_command(
@@ -73,7 +86,14 @@ def part_command(
 
     try:
         require_positive("--step-mm", step_mm, "mm/pixel")
-        part = custom_part(mesh, W0_REGION, W0_TILING, name) if mesh else get_part(name)
+        view_names = check_views(views) if png else ()
+        for flag, path in (("--png", png), ("--map-png", map_png)):
+            if path is not None:
+                require_writable(path, flag)
+        if out is not None:
+            require_writable(out, "--out", folder=True)
+        with echo_warnings():
+            part = custom_part(mesh, W0_REGION, W0_TILING, name) if mesh else get_part(name)
         tmap = TactileMap.build(part.layout, step_mm=step_mm)
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
@@ -86,7 +106,9 @@ def part_command(
     if png:
         from sim.pictures import save_part_picture  # start-up: pyvista
 
-        typer.echo(f"picture: {save_part_picture(part, png, tuple(views.split(',')))}")
+        with staged([png]) as (tmp,):
+            save_part_picture(part, tmp, view_names)
+        typer.echo(f"picture: {png}")
     if map_png:
         from tactile.plot import save_map_picture  # start-up: matplotlib
 
@@ -113,6 +135,8 @@ def probe_command(
         require_positive("--max-force", max_force, "N")
         if n_forces < 2:
             raise ConfigError(f"--n-forces {n_forces} is out of range; allowed >= 2")
+        if png is not None:
+            require_writable(png, "--png")
         p = get_part(part)
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
@@ -137,9 +161,7 @@ def probe_command(
             f"{part}, central taxel; k = {cfg.stiffness_pa_per_m:.0e} Pa/m, full scale "
             f"{cfg.full_scale_pa / 1e3:.0f} kPa, gain spread {cfg.gain_spread:.0%}, seed {seed}"
         )
-        png.parent.mkdir(parents=True, exist_ok=True)
-        calibration_figure(curves, title).savefig(png, dpi=90)
-        typer.echo(f"chart: {png}")
+        typer.echo(f"chart: {save_figure(calibration_figure(curves, title), png, dpi=90)}")
 
 
 def _first(forces: np.ndarray, mask: np.ndarray) -> str:
@@ -155,6 +177,10 @@ def assets_command(
     from sim.mjcf import write_part  # start-up: mujoco
     from sim.parts import PARTS, get_part  # start-up: trimesh
 
+    try:
+        require_writable(out or ASSETS_DIR, "--out", folder=True)
+    except HandskinError as err:
+        raise _fail(err) from err
     for name in PARTS:
         for kind, path in write_part(get_part(name), out or ASSETS_DIR).items():
             typer.echo(f"{name} {kind}: {path}")

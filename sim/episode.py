@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import json
 from collections import Counter, OrderedDict
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import mujoco
@@ -41,11 +41,14 @@ from sim.episode_frames import (
 )
 from sim.mjlog import mujoco_warnings_logged
 from sim.parts import Part, get_part
+from sim.scene import link_mesh_file
 from sim.skin import SkinConfig, SkinInstance
+from tactile.dataset.schema import MAX_CONTACTS
 from tactile.errors import ConfigError
+from tactile.labels import label_image
 from tactile.tactile_map import TactileMap
 
-REASONS = ("warning", "nan", "too_deep", "no_contact", "few_taxels")
+REASONS = ("warning", "nan", "too_deep", "no_contact", "few_taxels", "no_room")
 FRAME_DT_S = 0.1  # s: the skin is sampled at 10 Hz (Albini & Cannata 2020)
 CONTROL_DT_S = 0.01  # s: the schedule's targets are updated at 100 Hz
 SENSOR_BIT = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
@@ -99,16 +102,18 @@ class EpisodeContext:
             self.part.layout.positions_m, self.cfg.skin, rng, self.part.sensor_faces
         )
         self.along = placement.link_axis(self.part)
+        self.link_file = link_mesh_file(self.part)  # compiled once, then from MuJoCo's cache
         self._cache: OrderedDict[str, press.PressScene] = OrderedDict()
 
-    def scene(self, contactor: ContactorSpec) -> press.PressScene:
-        """The compiled press scene of ``contactor`` (LRU cache keyed by `contactor_key`)."""
-        key = contactor_key(contactor)
+    def scene(self, contactor: ContactorSpec | Sequence[ContactorSpec]) -> press.PressScene:
+        """The compiled press scene of ``contactor`` (or of several pressing at once; LRU cache
+        keyed by `contactor_key`)."""
+        key = " + ".join(contactor_key(c) for c in as_list(contactor))
         if key in self._cache:
             self._cache.move_to_end(key)
             return self._cache[key]
         scene = press.build_press_scene(
-            self.part, contactor, self.cfg.timestep_s, self.cfg.solver_iterations
+            self.part, contactor, self.cfg.timestep_s, self.cfg.solver_iterations, self.link_file
         )
         self._cache[key] = scene
         if len(self._cache) > self.cfg.cache_size:
@@ -116,9 +121,16 @@ class EpisodeContext:
         return scene
 
 
+def as_list(items):
+    """``items`` as a list: one contactor (or plan) becomes a list of one."""
+    return list(items) if isinstance(items, list | tuple) else [items]
+
+
 def contactor_key(c: ContactorSpec) -> str:
-    """Identity of a contactor's geometry: same key, same compiled model."""
-    return json.dumps([c.kind, c.name, c.subject_id, c.instance_id, c.description], sort_keys=True)
+    """Identity of a contactor's geometry: same key, same compiled model (the press mode a
+    non-hand's description records is not geometry)."""
+    geometry = {k: v for k, v in c.description.items() if k != "press"}
+    return json.dumps([c.kind, c.name, c.subject_id, c.instance_id, geometry], sort_keys=True)
 
 
 def site_pose(ctx: EpisodeContext, plan: PressPlan, rng: np.random.Generator):
@@ -156,35 +168,66 @@ def _check(scene: press.PressScene, depth_m: np.ndarray, max_pen_m: float) -> No
 
 def run_episode(
     ctx: EpisodeContext,
-    contactor: ContactorSpec,
-    plan: PressPlan,
+    contactor: ContactorSpec | Sequence[ContactorSpec],
+    plan: PressPlan | Sequence[PressPlan],
     rng: np.random.Generator,
     keep_release: bool = False,
 ) -> Frames:
-    """Simulate ``plan`` and read the skin every `FRAME_DT_S`; EpisodeFailure when unstable.
+    """Simulate ``plan`` (one per contactor when several press at once) and read the skin every
+    `FRAME_DT_S`; EpisodeFailure when unstable.
 
-    Frames up to the end of the hold are always simulated and checked; with ``keep_release`` (or
-    ``skip_release`` off) the release frames follow, and a failure among them only ends the
-    sequence there. The selection (`Frames.best`) is among the load and hold frames either way.
+    Frames up to the end of the (latest) hold are always simulated and checked; with
+    ``keep_release`` (or ``skip_release`` off) the release frames follow, and a failure among
+    them only ends the sequence there. The selection (`Frames.best`) is among the load and hold
+    frames either way.
     """
-    scene = ctx.scene(contactor)
-    _, pos, quat = site_pose(ctx, plan, rng)
-    press.reset(scene, plan, pos, quat)
-    n_hold = _n_frames(sum(plan.durations_s[:3]))
-    release = keep_release or not ctx.cfg.skip_release
-    n_frames = _n_frames(plan.total_s) if release else n_hold
-    per_frame = round(FRAME_DT_S / CONTROL_DT_S)
-    sched = press.schedule(scene, plan, np.arange(n_frames * per_frame) * CONTROL_DT_S)
+    start = start_episode(ctx, contactor, plan, rng, keep_release)
+    max_pen_m = max(c.max_penetration_m for c in as_list(contactor))
     frames: list[Frame] = []
     with mujoco_warnings_logged():  # _check rejects them; no stderr line, no MUJOCO_LOG.TXT
-        for k in range(n_frames):
+        for k in range(start.n_frames):
             try:
-                frames.append(_step_frame(ctx, scene, sched, k, contactor.max_penetration_m))
+                frames.append(_step_frame(ctx, start.scene, start.sched, k, max_pen_m))
             except EpisodeFailure:
-                if k < n_hold:
+                if k < start.n_hold:
                     raise
                 break
-    return Frames(frames, n_hold)
+    return Frames(frames, start.n_hold)
+
+
+@dataclass(frozen=True)
+class EpisodeStart:
+    """An episode placed on its compiled scene (reset to the plan's start), ready to step:
+    its per-tick schedule, the frames to simulate and the end of the hold (frames)."""
+
+    scene: press.PressScene
+    sched: press.Schedule
+    n_frames: int
+    n_hold: int
+
+
+def start_episode(
+    ctx: EpisodeContext,
+    contactor: ContactorSpec | Sequence[ContactorSpec],
+    plan: PressPlan | Sequence[PressPlan],
+    rng: np.random.Generator,
+    keep_release: bool = False,
+) -> EpisodeStart:
+    """Draw the site of every plan from ``rng`` (in order), reset the contactors' scene there
+    and schedule the ticks (shared by `run_episode` and the batched backend,
+    `sim.warp_backend`)."""
+    scene, plans = ctx.scene(contactor), as_list(plan)
+    poses = [site_pose(ctx, p, rng)[1:] for p in plans]
+    if len(plans) == 1:
+        press.reset(scene, plans[0], *poses[0])
+    else:
+        press.reset(scene, plans, [pos for pos, _ in poses], [quat for _, quat in poses])
+    n_hold = max(_n_frames(sum(p.durations_s[:3])) for p in plans)
+    release = keep_release or not ctx.cfg.skip_release
+    n_frames = max(_n_frames(p.total_s) for p in plans) if release else n_hold
+    per_frame = round(FRAME_DT_S / CONTROL_DT_S)
+    sched = press.schedule(scene, plans, np.arange(n_frames * per_frame) * CONTROL_DT_S)
+    return EpisodeStart(scene, sched, n_frames, n_hold)
 
 
 def _n_frames(duration_s: float) -> int:
@@ -220,15 +263,16 @@ def frame_rng(ep_seed: int, frame: Frame) -> np.random.Generator:
     return np.random.default_rng([ep_seed, round(frame.time_s / FRAME_DT_S)])
 
 
-Maker = Callable[[np.random.Generator], tuple[ContactorSpec, PressPlan]]
+#: ``make(rng) -> (contactor, plan)``, or (contactors, plans) for several pressing at once
+Maker = Callable[[np.random.Generator], tuple[ContactorSpec | list, PressPlan | list]]
 
 
 @dataclass(frozen=True)
 class Attempt:
     """The kept attempt of a sample: what was pressed, its frames and its episode seed."""
 
-    contactor: ContactorSpec
-    plan: PressPlan
+    contactor: ContactorSpec | list[ContactorSpec]
+    plan: PressPlan | list[PressPlan]
     frames: Frames
     ep_seed: int  # uint64 episode seed (`episode_rng`): the read noise of its frames
     rejects: Counter  # failed attempts before it, by reason (`REASONS`)
@@ -247,39 +291,56 @@ def select_attempt(
     rejects: Counter = Counter()
     for attempt in range(ctx.cfg.max_attempts):
         rng, ep_seed = episode_rng(seed, index, attempt)
-        contactor, plan = make(rng)
         try:
+            contactor, plan = make(rng)  # a maker of several contacts may fail ("no_room")
             frames = run_episode(ctx, contactor, plan, rng, keep_release=keep_release)
-            if frames.best_active == 0:
-                raise EpisodeFailure("no_contact", "no active taxel in any frame")
-            if frames.best_active < ctx.cfg.min_active_taxels:
-                raise EpisodeFailure(
-                    "few_taxels",
-                    f"{frames.best_active} active taxels < "
-                    f"min_active_taxels = {ctx.cfg.min_active_taxels}",
-                )
+            check_contact(ctx, frames)
         except EpisodeFailure as failure:
             rejects[failure.reason] += 1
             continue
         return Attempt(contactor, plan, frames, ep_seed, rejects)
+    raise attempts_exhausted(index, seed, ctx, rejects)
+
+
+def check_contact(ctx: EpisodeContext, frames: Frames) -> None:
+    """EpisodeFailure "no_contact" / "few_taxels" unless the selected frame presses at least
+    ``ctx.cfg.min_active_taxels`` taxels."""
+    if frames.best_active == 0:
+        raise EpisodeFailure("no_contact", "no active taxel in any frame")
+    if frames.best_active < ctx.cfg.min_active_taxels:
+        raise EpisodeFailure(
+            "few_taxels",
+            f"{frames.best_active} active taxels < min_active_taxels = {ctx.cfg.min_active_taxels}",
+        )
+
+
+def attempts_exhausted(index: int, seed: int, ctx: EpisodeContext, rejects: Counter) -> ConfigError:
+    """The error of sample ``index`` whose ``max_attempts`` attempts all failed (by reason)."""
     fix = (
         "lower episode.min_active_taxels or raise episode.max_attempts"
         if rejects["few_taxels"]
         else "check the contactor's force and max_penetration_m, or raise max_attempts"
     )
-    raise ConfigError(
+    return ConfigError(
         f"sample {index} (seed {seed}) failed {ctx.cfg.max_attempts} attempts: {dict(rejects)}. "
         f"Fix: {fix}"
     )
 
 
 def run_sample(
-    index: int, seed: int, ctx: EpisodeContext, make: Maker, keep_sequence: bool = False
+    index: int,
+    seed: int,
+    ctx: EpisodeContext,
+    make: Maker,
+    keep_sequence: bool = False,
+    several: bool = False,
 ) -> tuple[dict, Counter]:
     """Sample ``index`` of a dataset seeded ``seed``: (sample dict, reject counts by reason),
-    from the attempt `select_attempt` keeps."""
+    from the attempt `select_attempt` keeps (``several``: the dataset holds samples of several
+    contacts, so every sample carries their fields)."""
     a = select_attempt(index, seed, ctx, make, keep_release=keep_sequence)
-    return make_sample(ctx, a.contactor, a.plan, a.frames, a.ep_seed, keep_sequence), a.rejects
+    sample = make_sample(ctx, a.contactor, a.plan, a.frames, a.ep_seed, keep_sequence, several)
+    return sample, a.rejects
 
 
 def reading(ctx: EpisodeContext, frame: Frame, ep_seed: int) -> np.ndarray:
@@ -290,41 +351,65 @@ def reading(ctx: EpisodeContext, frame: Frame, ep_seed: int) -> np.ndarray:
 
 def make_sample(
     ctx: EpisodeContext,
-    contactor: ContactorSpec,
-    plan: PressPlan,
+    contactor: ContactorSpec | Sequence[ContactorSpec],
+    plan: PressPlan | Sequence[PressPlan],
     frames: Frames,
     ep_seed: int,
     keep_sequence: bool,
+    several: bool = False,
 ) -> dict:
-    """The dataset sample dict (`tactile.dataset.schema`) of the best frame of ``frames``."""
+    """The dataset sample dict (`tactile.dataset.schema`) of the best frame of ``frames``.
+
+    With several contactors the sample's action, operator position and person are the first
+    hand's, its instance the first non-hand's; ``several`` adds the fields of every contact
+    (count, people, instances, the contact per pixel) and writes the contactors as a JSON list.
+    """
+    contactors, plans = as_list(contactor), as_list(plan)
     best = frames.best
     frames_used = frames.frames if keep_sequence else [best]
     seq = [reading(ctx, f, ep_seed) for f in frames_used]
     raw = seq[frames.best_index] if keep_sequence else seq[0]
     sensed = sensed_pressure(ctx.skin, raw, best.time_s)
-    label, who = label_taxels(ctx.skin, best, ctx.cfg.active_pa)
-    image, label_image = tactile_images(ctx.tmap, sensed, label)
+    label, who = label_taxels(ctx.skin, best, ctx.cfg.active_pa, len(contactors))
+    image, classes = tactile_images(ctx.tmap, sensed, label)
+    kinds = [c.kind for c in contactors]
+    lead = kinds.index("hand") if "hand" in kinds else 0
+    other = next((c for c in contactors if c.kind != "hand"), contactors[0])
+    described = [{"kind": c.kind, "name": c.name, **c.description} for c in contactors]
     sample = {
         "raw": raw,
         "pressure_pa": best.pressure_pa.astype(np.float32),
         "taxel_label": label.astype(np.uint8),
         "taxel_contactor": who.astype(np.int16),
         "image": image,
-        "label_image": label_image,
-        "is_hand": np.uint8(contactor.kind == "hand"),
-        "action": np.int8(plan.action),
-        "operator_position": np.int8(plan.operator_position),
-        "subject_id": np.int32(contactor.subject_id),
-        "instance_id": np.int32(contactor.instance_id),
-        "contactor": json.dumps(
-            {"kind": contactor.kind, "name": contactor.name, **contactor.description},
-            sort_keys=True,
-        ),
+        "label_image": classes,
+        "is_hand": np.uint8("hand" in kinds),
+        "action": np.int8(plans[lead].action),
+        "operator_position": np.int8(plans[lead].operator_position),
+        "subject_id": np.int32(contactors[lead].subject_id),
+        "instance_id": np.int32(other.instance_id),
+        "contactor": json.dumps(described if several else described[0], sort_keys=True),
         "episode_seed": np.uint64(ep_seed),
         "force_n": np.float32(best.force_n),
         "time_s": np.float32(best.time_s),
     }
+    if several:
+        sample |= contact_fields(ctx, contactors, sensed, who, image)
     if keep_sequence:
         sample["seq_raw"] = np.stack(seq)
         sample["seq_length"] = np.int16(len(seq))
+        sample["seq_phase_s"] = np.cumsum(plans[lead].durations_s).astype(np.float32)
     return sample
+
+
+def contact_fields(ctx: EpisodeContext, contactors, sensed_pa, who, image) -> dict:
+    """The fields of every contact: their count, people and instances (-1 padded to
+    `MAX_CONTACTS`), and the contact of each pixel (0 none, k + 1 contact k), made like the
+    label image (`tactile.labels.label_image` over contacts instead of hand parts)."""
+    pad = [-1] * (MAX_CONTACTS - len(contactors))
+    return {
+        "n_contacts": np.uint8(len(contactors)),
+        "contact_subject": np.array([c.subject_id for c in contactors] + pad, np.int32),
+        "contact_instance": np.array([c.instance_id for c in contactors] + pad, np.int32),
+        "instance_image": label_image(ctx.tmap, sensed_pa, who + 1, image=image),
+    }

@@ -12,11 +12,13 @@ a pressed taxel (contacts on bare link are not felt).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import mujoco
 import numpy as np
 
 from sim.press import PressScene
+from sim.readout import ContactSnapshot, LinkContacts, TaxelReadout, link_contacts
 from sim.skin import SkinInstance, depth_to_pressure
 from tactile.labels import label_image
 from tactile.tactile_map import TactileMap
@@ -32,21 +34,38 @@ class Frame:
     """The skin at one sample time.
 
     depth_m, pressure_pa : (N,) float, m and Pa (noise-free, after the spread kernel).
-    geom : (N,) int64 index into the scene's readout geoms of the deepest one, -1 none.
-    geom_label : (N,) int64 class of that geom (0 where none or non-hand).
     active : taxels with pressure_pa above the active threshold. force_n : total normal force
     between contactor and link, N. sensed_force_n : the part of it on the sensorized region
     (the resultant of ``pressure_pa``), N. time_s : time in the episode, s.
+    snapshot, readout, geom_labels : what `geom` and `geom_label` are computed from, on first
+    use (only the selected frame of an episode is attributed).
     """
 
     time_s: float
     depth_m: np.ndarray
     pressure_pa: np.ndarray
-    geom: np.ndarray
-    geom_label: np.ndarray
     active: int
     force_n: float
-    sensed_force_n: float = 0.0
+    sensed_force_n: float
+    snapshot: ContactSnapshot
+    readout: TaxelReadout
+    geom_labels: np.ndarray  # (K,) int64 class of each readout contactor geom
+    geom_contactors: np.ndarray  # (K,) int64 contactor of each readout geom (0 with one)
+
+    @cached_property
+    def geom(self) -> np.ndarray:
+        """(N,) int64 index into the scene's readout geoms of the deepest one, -1 none."""
+        return self.readout.attribute(self.snapshot)
+
+    @cached_property
+    def geom_label(self) -> np.ndarray:
+        """(N,) int64 class of that geom (0 where none or non-hand)."""
+        return np.where(self.geom >= 0, self.geom_labels[self.geom], 0)
+
+    @cached_property
+    def contactor(self) -> np.ndarray:
+        """(N,) int64 contactor of that geom (-1 where none)."""
+        return np.where(self.geom >= 0, self.geom_contactors[self.geom], -1)
 
 
 @dataclass(frozen=True)
@@ -72,23 +91,16 @@ class Frames:
         return self.best.active if self.frames else 0
 
 
-def link_contacts(model: mujoco.MjModel, data: mujoco.MjData, link_body: int) -> np.ndarray:
-    """(C,) int64 indices of the contacts between the weld body ``link_body`` and anything else."""
-    pairs = np.asarray(data.contact.geom[: data.ncon]).reshape(-1, 2)
-    on_link = model.body_weldid[model.geom_bodyid[pairs]] == link_body
-    return np.flatnonzero(on_link[:, 0] != on_link[:, 1])
-
-
 def contact_forces_n(
     model: mujoco.MjModel,
     data: mujoco.MjData,
-    link_body: int,
+    contacts: LinkContacts,
     pressed_m: np.ndarray,
     radius_m: float,
 ) -> tuple[float, float]:
-    """(total, sensed) normal force (N) of the contacts on the link: all of them, and those whose
+    """(total, sensed) normal force (N) of the link's ``contacts``: all of them, and those whose
     point lies within ``radius_m`` (m) of a pressed taxel (world positions (K, 3), m)."""
-    idx = link_contacts(model, data, link_body)
+    idx = contacts.index
     normal = _normal_forces_n(model, data, idx)
     if not idx.size or not len(pressed_m):
         return float(normal.sum()), 0.0
@@ -112,15 +124,26 @@ def _normal_forces_n(model: mujoco.MjModel, data: mujoco.MjData, idx: np.ndarray
 
 def read_frame(scene: PressScene, skin: SkinInstance, active_pa: float, time_s: float) -> Frame:
     """The frame of the current state (call after `mj_forward` with sensors enabled)."""
-    m, d = scene.model, scene.data
-    out = scene.readout.read(m, d)
-    pressed = scene.readout.positions_m(d, np.flatnonzero(out.depth_m > 0))
+    m, d, readout = scene.model, scene.data, scene.readout
+    depth = readout.depth_m(d)
+    contacts = link_contacts(m, d, readout.link_body)
+    snap = readout.snapshot(m, d, depth, contacts)
     radius = SENSED_RADIUS_SPACINGS * skin.spacing_m
-    total, sensed = contact_forces_n(m, d, scene.readout.link_body, pressed, radius)
-    pressure = skin.pressure(out.depth_m, sensed)
-    label = np.where(out.contactor >= 0, scene.geom_label[out.contactor], 0)
+    total, sensed = contact_forces_n(m, d, contacts, snap.points_m, radius)
+    pressure = skin.pressure(depth, sensed)
     active = int(np.count_nonzero(pressure > active_pa))
-    return Frame(time_s, out.depth_m, pressure, out.contactor, label, active, total, sensed)
+    return Frame(
+        time_s,
+        depth,
+        pressure,
+        active,
+        total,
+        sensed,
+        snap,
+        readout,
+        scene.geom_label,
+        scene.geom_contactor,
+    )
 
 
 def sensed_pressure(skin: SkinInstance, reading: np.ndarray, time_s: float) -> np.ndarray:
@@ -130,21 +153,25 @@ def sensed_pressure(skin: SkinInstance, reading: np.ndarray, time_s: float) -> n
 
 
 def label_taxels(
-    skin: SkinInstance, frame: Frame, active_pa: float
+    skin: SkinInstance, frame: Frame, active_pa: float, n_contactors: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-taxel (class (N,) int64 0..6, contactor index (N,) int64, 0 or -1) of one frame.
+    """Per-taxel (class (N,) int64 0..6, contactor index (N,) int64, -1 none) of one frame.
 
     An active taxel (noise-free pressure above ``active_pa``) takes the class contributing most
     of its pressure through the spread kernel (attributed taxels' own pressure, by class), so
-    taxels activated only by spreading inherit their neighbours' class; contactor index 0 (the
-    sample's single contactor) where any attributed pressure reaches it, -1 elsewhere.
+    taxels activated only by spreading inherit their neighbours' class; likewise the contactor
+    (of ``n_contactors``) contributing most, where any attributed pressure reaches it.
     """
     base = depth_to_pressure(frame.depth_m, skin.cfg) * (frame.geom >= 0)
     classes = np.arange(7)[:, None]
     parts = np.asarray(skin.spread @ (base[None, :] * (frame.geom_label == classes)).T).T
     reached = (frame.pressure_pa > active_pa) & (parts.sum(axis=0) > 0)
     label = np.where(reached, parts.argmax(axis=0), 0)
-    return label.astype(np.int64), np.where(reached, 0, -1).astype(np.int64)
+    if n_contactors == 1:
+        return label.astype(np.int64), np.where(reached, 0, -1).astype(np.int64)
+    ids = np.arange(n_contactors)[:, None]
+    share = np.asarray(skin.spread @ (base[None, :] * (frame.contactor == ids)).T).T
+    return label.astype(np.int64), np.where(reached, share.argmax(axis=0), -1).astype(np.int64)
 
 
 def tactile_images(

@@ -8,6 +8,7 @@ memory stays flat however many chunks there are.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
@@ -35,11 +36,13 @@ def run_chunks(
     *,
     initializer: Callable[..., None] | None = None,
     initargs: tuple = (),
+    mp_context: str | None = None,
 ) -> Iterator[ChunkResult]:
     """Compute chunks ``todo`` with ``workers`` processes; yield results as they finish.
 
     At most ``2 × workers`` chunks are in flight. With ``workers == 1`` everything runs in this
     process (after calling ``initializer``), which is easiest to debug and profile.
+    ``mp_context``: how workers start ("spawn", "fork"; None: the platform's default).
     """
     if workers < 1:
         raise ConfigError(f"workers must be >= 1, got {workers}")
@@ -51,7 +54,10 @@ def run_chunks(
         return
     pending: set[Future] = set()
     queue = iter(todo)
-    with ProcessPoolExecutor(workers, initializer=initializer, initargs=initargs) as pool:
+    context = multiprocessing.get_context(mp_context) if mp_context else None
+    with ProcessPoolExecutor(
+        workers, mp_context=context, initializer=initializer, initargs=initargs
+    ) as pool:
         for k in queue:
             pending.add(pool.submit(make_chunk, k))
             if len(pending) >= 2 * workers:

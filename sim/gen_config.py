@@ -22,7 +22,7 @@ from handskin import __version__
 from sim.episode import EpisodeConfig
 from sim.hand import HAND_DETAILS
 from sim.parts import PARTS
-from tactile.config import from_dict, load_config, override
+from tactile.config import RECORD_WHEN_SET, from_dict, load_config, override
 from tactile.dataset.manifest import MANIFEST, read_manifest
 from tactile.dataset.splits import METHODS
 from tactile.errors import ConfigError, DataError
@@ -31,6 +31,9 @@ PAPER_SAMPLES = 3530  # Albini & Cannata, IJRR 2020: 1,710 hand + 1,820 non-hand
 PAPER_HAND_FRACTION = 1710 / 3530
 MESH_SUFFIXES = (".stl", ".obj")
 MAX_CHUNKS = 10**6  # chunk file names have six digits
+# Simulators: "mujoco" (C MuJoCo, one episode at a time per worker) or "warp" (MuJoCo Warp, many
+# episodes as the worlds of one batched model; `sim.warp_backend`, the warp extra).
+BACKENDS = ("mujoco", "warp")
 # (low, high) inclusive ranges; None = unbounded on that side.
 RANGES: dict[str, tuple[float | None, float | None]] = {
     "n": (1, 10**8),
@@ -48,7 +51,32 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "episode.max_attempts": (1, 100),
     "episode.min_active_taxels": (1, 100_000),
     "episode.cache_size": (1, 1024),
+    "mix.fraction": (0.0, 1.0),
+    "mix.same_person": (0.0, 1e6),
+    "mix.two_people": (0.0, 1e6),
+    "mix.hand_object": (0.0, 1e6),
+    "mix.hand_body": (0.0, 1e6),
+    "mix.min_gap_mm": (0.0, 1e4),
 }
+
+
+@dataclass(frozen=True)
+class MixConfig:
+    """Samples pressed by two contactors at once (`sim.mix`); off by default."""
+
+    # Share of samples with two contacts, unitless: 0 (the default) makes every sample a single
+    # contact and keeps the bytes of datasets made without this option.
+    fraction: float = 0.0
+    # Relative weights of a hand's second contact: the same person's other hand, another
+    # person's hand, an object, a body part. (An object's second is a body part; a body part's an
+    # object.)
+    same_person: float = 1.0
+    two_people: float = 1.0
+    hand_object: float = 1.0
+    hand_body: float = 1.0
+    # mm on the flat map: the second contact's site at least this far from the first's (a hand
+    # print is ~80 mm wide, so two palms 100 mm apart barely touch).
+    min_gap_mm: float = 100.0
 
 
 @dataclass(frozen=True)
@@ -87,9 +115,14 @@ class GenerateConfig:
     # Multiplier on every press plan's phase durations (approach, load, hold, release),
     # unitless; 1 = the interaction models' own timing, < 1 for quick smoke tests (`sim.tiny`).
     duration_scale: float = 1.0
+    # Simulator (`BACKENDS`): the two give statistically equivalent data, not the same bytes, so
+    # the backend is part of the dataset's identity (a folder of one is never resumed by other).
+    backend: str = field(default="mujoco", metadata=RECORD_WHEN_SET)
     # Episode runner (time step s, active threshold Pa, retries, scene cache) and its nested skin
     # model ([episode.skin]: stiffness Pa/m, noise counts, ...). episode.part follows `part`.
     episode: EpisodeConfig = field(default_factory=EpisodeConfig)
+    # Several contacts at once ([mix]: fraction, weights, min_gap_mm); recorded only when set.
+    mix: MixConfig = field(default_factory=MixConfig, metadata=RECORD_WHEN_SET)
 
     def __post_init__(self) -> None:
         for name, (lo, hi) in RANGES.items():
@@ -97,6 +130,21 @@ class GenerateConfig:
         check_part(self.part)
         if self.split not in METHODS:
             raise ConfigError(f"split = {self.split!r} unknown; choose one of {', '.join(METHODS)}")
+        if self.mix.fraction > 0 and self.split != "keyed":
+            raise ConfigError(
+                f'mix.fraction = {self.mix.fraction:g} needs split = "keyed" (a sample\'s two '
+                'contactors must fall on one side of the split); set split = "keyed"'
+            )
+        weights = (self.mix.same_person, self.mix.two_people, self.mix.hand_object)
+        if self.mix.fraction > 0 and not sum(weights) + self.mix.hand_body > 0:
+            raise ConfigError(
+                "mix: give at least one of same_person, two_people, hand_object, "
+                "hand_body a weight > 0"
+            )
+        if self.backend not in BACKENDS:
+            raise ConfigError(
+                f"backend = {self.backend!r} unknown; choose one of {', '.join(BACKENDS)}"
+            )
         if self.hand_detail not in HAND_DETAILS:
             raise ConfigError(
                 f"hand_detail = {self.hand_detail!r} unknown; choose one of "
@@ -201,4 +249,18 @@ def refuse_other_code(out: Path, manifest: dict) -> None:
             f"{out} was started by other generator code ({old.get('generator_version')}; now "
             f"{manifest['generator_version']}): sim/ or tactile/ changed since, so its chunks "
             "cannot be mixed with new ones. Fix: a new --out folder, or the original code"
+        )
+
+
+def refuse_other_backend(out: Path, manifest: dict) -> None:
+    """DataError when ``out`` was started with the other simulator backend (`BACKENDS`)."""
+    if not (out / MANIFEST).is_file():
+        return
+    old = read_manifest(out)["config"].get("backend", "mujoco")
+    new = manifest["config"].get("backend", "mujoco")  # recorded only when set
+    if old != new:
+        raise DataError(
+            f"{out} holds a dataset generated with --backend {old}; this run asks for --backend "
+            f"{new}. The backends' data agree statistically, not byte for byte, so their chunks "
+            f"are never mixed. Fix: a new --out folder, or --backend {old}"
         )

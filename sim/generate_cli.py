@@ -6,15 +6,19 @@
 
 from __future__ import annotations
 
+import contextlib
+import warnings
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from sim.shards import merge_shards, parse_shard
+from sim.warp_options import WarpOptions
 from tactile.config import to_toml
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, HandskinError
+from tactile.files import require_writable
 
 
 def _fail(err: Exception) -> typer.Exit:
@@ -22,15 +26,30 @@ def _fail(err: Exception) -> typer.Exit:
     return typer.Exit(2)
 
 
+@contextlib.contextmanager
+def echo_warnings():
+    """Print each warning raised inside (e.g. a repaired link mesh) as one ``warning:`` line."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = lambda message, *_: typer.echo(f"warning: {message}", err=True)
+        yield
+
+
+TOML_KEYS = {"SkinConfig.": "episode.skin.", "EpisodeConfig.": "episode."}  # class -> TOML key
+
+
 def as_flags(err: ConfigError, given: dict[str, object]) -> ConfigError:
     """``err`` with a leading ``field = value`` written as the flag the user typed
-    (``chunk_size = 0 is out of range`` -> ``--chunk-size 0 is out of range``)."""
+    (``chunk_size = 0 is out of range`` -> ``--chunk-size 0 is out of range``), and a nested
+    dataclass's field as its TOML key (``SkinConfig.noise`` -> ``episode.skin.noise``)."""
     text = str(err)
+    for name, key in TOML_KEYS.items():
+        text = text.replace(name, key)
     for key, value in given.items():
         field = f"{key} = {value!r}"
         if value is not None and text.startswith(field):
             return ConfigError(f"--{key.replace('_', '-')} {value}{text[len(field) :]}")
-    return err
+    return ConfigError(text)
 
 
 def generate_command(
@@ -103,6 +122,15 @@ def generate_command(
         str | None,
         typer.Option(help="Run on Ray: local, auto or an address (needs the ray extra)."),
     ] = None,
+    backend: Annotated[
+        str | None, typer.Option(help="Simulator: mujoco (default) or warp.")
+    ] = None,
+    worlds: Annotated[int | None, typer.Option(help="Warp: episodes per batch (count).")] = None,
+    device: Annotated[str | None, typer.Option(help="Warp device: cpu, cuda, cuda:N.")] = None,
+    nconmax: Annotated[int | None, typer.Option(help="Warp: contacts per world (derived).")] = None,
+    njmax: Annotated[
+        int | None, typer.Option(help="Warp: constraint rows/world (derived).")
+    ] = None,
     print_config: Annotated[
         bool, typer.Option("--print-config", help="Print the resolved configuration (TOML), exit.")
     ] = False,
@@ -115,7 +143,7 @@ def generate_command(
     from sim.generate import generate  # start-up: mujoco
 
     flags = {"n": n, "hand_fraction": hand_fraction, "seed": seed, "split": split}
-    flags |= {"chunk_size": chunk_size, "workers": workers}
+    flags |= {"chunk_size": chunk_size, "workers": workers, "backend": backend}
     try:
         cfg = load_generate_config(
             config,
@@ -126,13 +154,22 @@ def generate_command(
             split=split,
             keep_sequences=keep_sequences,
             chunk_size=chunk_size,
+            backend=backend,
         )
         if print_config:
             typer.echo(to_toml(cfg), nl=False)
             return
-        run = generate(
-            cfg, out, workers=workers, shard=parse_shard(shard), ray=ray, progress=progress
-        )
+        require_writable(out, "--out", folder=True)
+        with echo_warnings():  # a repaired link mesh says so
+            run = generate(
+                cfg,
+                out,
+                workers=workers,
+                shard=parse_shard(shard),
+                ray=ray,
+                progress=progress,
+                warp=warp_options(worlds, device, nconmax, njmax),
+            )
     except ConfigError as err:
         raise _fail(as_flags(err, flags)) from err
     except HandskinError as err:
@@ -149,6 +186,15 @@ def generate_command(
     )
     if run.dataset:
         typer.echo(split_line(run.dataset))
+
+
+def warp_options(
+    worlds: int | None, device: str | None, nconmax: int | None, njmax: int | None
+) -> WarpOptions | None:
+    """The warp backend's options from its flags (None when none is given), checked."""
+    given = {"worlds": worlds, "device": device, "nconmax": nconmax, "njmax": njmax}
+    given = {k: v for k, v in given.items() if v is not None}
+    return WarpOptions(**given) if given else None
 
 
 def split_line(dataset: Path) -> str:
@@ -177,6 +223,7 @@ def merge_command(
     """Merge dataset shards (`generate --shard i/n`) into one dataset, equal to a single run."""
 
     try:
+        require_writable(out, "--out", folder=True)
         path = merge_shards(shards, out)
     except HandskinError as err:
         raise _fail(err) from err

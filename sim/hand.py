@@ -37,10 +37,14 @@ segment to what a contact must look like, and measured: the pulp's allowance (1.
 fingertip pressed with 2-5 N on MuJoCo's tactile plate sink 2.5-3 mm and touch 11-14 mm across
 for hands of 15-22 cm (the chord of its capsule end; a pressed finger pad touches about 10-15 mm
 across; tests/sim/test_hand.py); the phalanx pads (5 x) flatten across the finger's width, so a
-finger lying on the link prints a stripe; the palm takes 2.75 x. On the default forearm (320
-samples, seed 2020, forces of `sim.interactions`) a hand contact lights a median of 40 taxels
-(quartiles 30 / 56), the palm holds 0.52 of the hand pixels (the paper: about 0.40) and 85 % of
-grasps show >= 3 fingers; a single 3.5 mm allowance on every segment would light a median of 16.
+finger lying on the link prints a stripe; the palm takes 2.75 x. On the paper-sized default set
+(`handskin stats`, docs/stats.md) a hand contact lights a mean of 42 taxels and the palm holds
+51 % of the labelled hand pixels (the paper: almost 40 %); a single 3.5 mm allowance on every
+segment would light a median of 16. The skin model reads pressure from depth, so a part's share
+of a print's pressure follows its allowance more than its force (docs/stats.md).
+
+Strength. Each digit's torque limits are scaled by `DIGIT_STRENGTH` so that the fingers and thumb
+share a grasp's contact force as people's do (`sim.hand_kinematics`).
 
 Labels. Collision geoms are named ``<prefix><part>_<segment>`` with part in `HAND_PARTS`
 (the thenar eminence on the first metacarpal is "palm"); `geom_parts` / `geom_part_ids` recover
@@ -57,6 +61,7 @@ import mujoco
 import numpy as np
 
 from sim.hand_kinematics import (
+    DIGIT_STRENGTH,
     FINGERS,
     HAND_POSES_DEG,
     JOINT_LIMITS_DEG,
@@ -377,7 +382,8 @@ class _Builder:
             ctrl = (-1.0, 1.0) if slide else (-np.pi, np.pi)
         else:
             key = suffix if suffix in JOINT_TORQUE_NM else suffix.split("_", 1)[1]
-            limit = JOINT_TORQUE_NM[key] * self.cfg.strength
+            digit = DIGIT_STRENGTH.get(suffix.split("_", 1)[0], 1.0)
+            limit = JOINT_TORQUE_NM[key] * self.cfg.strength * digit
             kp, ctrl = limit / SERVO_ERROR_AT_LIMIT_RAD, tuple(joint.range)
         act = self.spec.add_actuator(
             name=joint.name,

@@ -187,6 +187,21 @@ JOINT_TORQUE_NM: dict[str, float] = {
     "thumb_ip": 0.12,
     "palm_arch": 0.3,
 }
+# Strength of each digit: a multiplier on the torque limits (and servo gains) of all its joints.
+# Calibrated so that the hand's contact forces in grasps of the default forearm (60 grasps, seed 5,
+# MuJoCo contact forces of each part) share as people's do: index 30.4, middle 31.4, ring 23.3,
+# little 14.9 % of the four fingers' force (Li, J Hand Surg Am 27(5), 2002, maximal grip: 32.2 ±
+# 3.8, 32.6 ± 4.3, 23.5 ± 4.5, 11.7 ± 4.9 %) and the thumb 17 % of the five digits' (J Hand Surg
+# Am 2014, doi 10.1016/j.jhsa.2014.06.121: an estimated 17 % of grip strength). Equal limits gave
+# 24.6, 19.1, 24.5, 31.8 % and a thumb of 2 %: a short little finger pushes hardest on the same
+# torque.
+DIGIT_STRENGTH: dict[str, float] = {
+    "thumb": 1.55,
+    "index": 1.3,
+    "middle": 1.66,
+    "ring": 0.88,
+    "pinkie": 0.29,
+}
 SERVO_ERROR_AT_LIMIT_RAD = 0.6  # kp = torque limit / this: compliant, fingers conform to a surface
 
 

@@ -109,6 +109,7 @@ def _hand_contactor(subject: Subject) -> ContactorSpec:
         "breadth_m": cfg.breadth_m,
         "tissue_depth_m": cfg.tissue_depth_m,
         "subject": subject.subject_id,
+        "sex": subject.sex,
     }
     if cfg.detail != "full":  # the default hand's description (and dataset bytes) stay as they were
         desc["detail"] = cfg.detail

@@ -15,6 +15,7 @@ import mujoco
 from sim.parts import Part
 from sim.probe import Probe, central_taxel
 from sim.scene import Contactor, scene_spec
+from tactile.files import atomic_path, write_text_atomic
 
 SCENE_PROBE = Probe("sphere", (0.015,), 0.05)
 
@@ -36,7 +37,7 @@ def probe_contactor(part: Part, probe: Probe = SCENE_PROBE) -> Contactor:
 
 def _write_xml(spec: mujoco.MjSpec, path: Path) -> Path:
     spec.compile()  # raises with MuJoCo's message if the model is invalid
-    path.write_text(spec.to_xml())
+    write_text_atomic(path, spec.to_xml())
     return path
 
 
@@ -45,7 +46,8 @@ def write_part(part: Part, out_dir: str | Path) -> dict[str, Path]:
     folder = Path(out_dir) / part.name
     folder.mkdir(parents=True, exist_ok=True)
     stl = folder / f"{part.name}_link.stl"
-    part.link.export(stl)
+    with atomic_path(stl) as tmp:
+        part.link.export(tmp, file_type="stl")
     paths = {"link": stl, "layout": folder / f"{part.name}_layout.npz"}
     part.layout.save(paths["layout"])
     for kind, contactors in (("model", ()), ("scene", (probe_contactor(part),))):

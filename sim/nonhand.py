@@ -23,6 +23,7 @@ description (``description["press"]``) so it reaches the dataset's contactor JSO
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -86,12 +87,25 @@ def sample_nonhand(
     """
     if not 1 <= instances_per_kind <= MAX_INSTANCES_PER_KIND:
         raise ConfigError(f"instances_per_kind={instances_per_kind}; allowed [1, 1000]")
-    table = mixture()
-    keys = list(table)
-    p = np.array([table[k] for k in keys])
-    kind, name = keys[int(rng.choice(len(keys), p=p / p.sum()))]
+    keys, p = _mixture_table()
+    kind, name = keys[int(rng.choice(len(keys), p=p))]
     iid = instance_id_for(kind, name, int(rng.integers(instances_per_kind)))
     return pressed_instance(kind, name, iid, rng)
+
+
+@lru_cache(maxsize=1)
+def _mixture_table() -> tuple[list[tuple[str, str]], np.ndarray]:
+    table = mixture()
+    p = np.array(list(table.values()))
+    return list(table), p / p.sum()
+
+
+@lru_cache(maxsize=512)
+def instance_spec(kind: str, name: str, instance_id: int) -> ContactorSpec:
+    """Instance ``instance_id`` of type ``name``: its geometry depends on the id alone, so it is
+    built once per worker (`build_object` and `build_body_part` draw nothing else)."""
+    build = build_object if kind == "object" else build_body_part
+    return build(name, None, instance_id)
 
 
 def pressed_instance(
@@ -99,10 +113,7 @@ def pressed_instance(
 ) -> tuple[ContactorSpec, PressPlan]:
     """Instance ``instance_id`` of type ``name`` ("object" or "body" ``kind``) and a press drawn
     from ``rng``; the press mode is recorded in the description as "press"."""
-    if kind == "object":
-        spec = build_object(name, rng, instance_id)
-        mode, plan = object_press(spec, rng)
-    else:
-        spec = build_body_part(name, rng, instance_id)
-        mode, plan = body_press(spec, rng)
+    spec = instance_spec(kind, name, instance_id)
+    press = object_press if kind == "object" else body_press
+    mode, plan = press(spec, rng)
     return replace(spec, description=spec.description | {"press": mode}), plan

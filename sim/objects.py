@@ -334,7 +334,7 @@ OBJECT_KINDS: tuple[str, ...] = tuple(BUILDERS)
 
 def build_object(
     kind: str,
-    rng: np.random.Generator,
+    rng: np.random.Generator | None,
     instance_id: int | None = None,
 ) -> ContactorSpec:
     """Object contactor ``kind`` (one of `OBJECT_KINDS`), instance ``instance_id``.

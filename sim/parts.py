@@ -8,6 +8,7 @@ metres; the sensor mesh's vertices are the layout's taxels in layout order, its 
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
@@ -17,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from sim import geometry
+from sim import geometry, link_mesh
 from sim.tiling import PlaneRegion, Tiling, TubeRegion, module_lattice, tile
 from tactile.errors import ConfigError
 from tactile.layout import TaxelLayout
@@ -234,15 +235,14 @@ def get_part(name: str) -> Part:
 
 
 def load_link_mesh(path: str | PathLike[str], scale: float = 1.0) -> trimesh.Trimesh:
-    """A link mesh from STL/OBJ (units: metres after `scale`). ConfigError if unreadable."""
-    path = Path(path)
-    if path.suffix.lower() not in (".stl", ".obj"):
-        raise ConfigError(f"link mesh {path} must be .stl or .obj")
-    if not path.is_file():
-        raise ConfigError(f"link mesh {path} not found")
-    mesh = trimesh.load(path, force="mesh")
-    if scale != 1.0:
-        mesh.apply_scale(scale)
+    """A link mesh from STL/OBJ (units: metres after `scale`), checked and repaired
+    (`sim.link_mesh`): ConfigError if unreadable, empty or not in metres; a `MeshRepaired`
+    warning saying what was repaired."""
+    mesh, notes = link_mesh.load_link_mesh(path, scale)
+    if notes:
+        warnings.warn(
+            link_mesh.MeshRepaired(f"link mesh {path} repaired: {', '.join(notes)}"), stacklevel=2
+        )
     return mesh
 
 
@@ -253,9 +253,16 @@ def custom_part(
     name: str = "custom",
     scale: float = 1.0,
 ) -> Part:
-    """Sensorize any link mesh: modules of `tiling` over `region` (link frame, m)."""
+    """Sensorize any link mesh: modules of `tiling` over `region` (link frame, m). ConfigError
+    names the file when the tiling does not fit the link."""
     link = load_link_mesh(mesh_path, scale)
-    return make_part(name, link, region, tiling, f"custom part from {Path(mesh_path).name}")
+    try:
+        return make_part(name, link, region, tiling, f"custom part from {Path(mesh_path).name}")
+    except ConfigError as err:
+        raise ConfigError(
+            f"link mesh {mesh_path}: its taxels cannot be placed ({err}). Fix: a link shaped, "
+            "sized and placed like Baxter's W0 (a tube about the z axis, metres)"
+        ) from None
 
 
 # Baxter W0 (real mesh, ../shared/data/baxter): its body is a rounded square tube about the axis

@@ -18,10 +18,15 @@ load, torque-limited by the contactor's own actuators: a hand's palm lands first
 fingers close (fingers closing during the approach would meet the link before the palm and prop
 it up). A hand's wrist (tilt hinges) is stiffer than an object's
 (`HAND_TILT_KP`), so closing fingers cannot roll the palm off the face.
+
+Several contactors press in one scene as several *drives*: contactor k > 0 is attached with the
+prefix ``c<k>_`` under its own body ``press<k>``, on root joints ``press<k>_x`` ...; contactor 0
+keeps the names above, so a one-contactor scene is the same model either way.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import mujoco
@@ -50,42 +55,70 @@ ROOT_MASS_KG = 0.02  # root body mass, so a root made only of attached children 
 
 
 @dataclass(eq=False)
-class PressScene:
-    """One compiled press scene (reused across episodes of the same contactor).
+class Drive:
+    """How one contactor of a press scene is driven: its root's actuators (6,) and qpos addresses
+    (6,) (order `ROOT_JOINTS`), its joints' actuators (unprefixed joint name -> id), its press
+    body, its wrist torque limit (N m), and the joint targets of the current plan (set by
+    `reset`: actuator ids, targets in rad, and which are preshaped)."""
 
-    geom_label : (K,) int64 class of each readout contactor geom; root_act, root_qpos : (6,) int
-    actuator ids and qpos addresses of the root joints (order `ROOT_JOINTS`); joint_act :
-    contactor joint name (unprefixed) -> its actuator id.
+    root_act: np.ndarray
+    root_qpos: np.ndarray
+    joint_act: dict[str, int]
+    press_body: int
+    tilt_limit_nm: float = TILT_LIMIT_NM
+    plan_act: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    plan_target: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    plan_preshape: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+
+
+@dataclass(eq=False)
+class PressScene:
+    """One compiled press scene (reused across episodes of the same contactors).
+
+    geom_label : (K,) int64 class of each readout contactor geom; geom_contactor : (K,) int64
+    which contactor it belongs to; drives : one `Drive` per contactor; compiled_forcerange :
+    (nu, 2) the actuators' force limits as compiled.
     """
 
     model: mujoco.MjModel
     data: mujoco.MjData
     readout: TaxelReadout
     geom_label: np.ndarray
-    root_act: np.ndarray
-    root_qpos: np.ndarray
-    joint_act: dict[str, int]
-    press_body: int
-    tilt_limit_nm: float = TILT_LIMIT_NM
-    plan_act: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # set by reset
-    plan_target: np.ndarray = field(default_factory=lambda: np.zeros(0))  # rad, set by reset
-    plan_preshape: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # set by reset
+    geom_contactor: np.ndarray
+    drives: tuple[Drive, ...]
+    compiled_forcerange: np.ndarray
+
+    @property
+    def joint_act(self) -> dict[str, int]:
+        """The first contactor's joint actuators (unprefixed joint name -> id)."""
+        return self.drives[0].joint_act
 
 
-def _add_root(spec: mujoco.MjSpec, tilt_kp: float = TILT_KP) -> None:
-    """Six joints and force-limited position actuators on the attached contactor root."""
-    root = spec.body(PREFIX + ROOT)
+def prefix(k: int) -> str:
+    """Attach prefix of contactor ``k`` in a press scene."""
+    return PREFIX if k == 0 else f"c{k}_"
+
+
+def press_name(k: int) -> str:
+    """Name of contactor ``k``'s press body, and the stem of its root joints and actuators."""
+    return "press" if k == 0 else f"press{k}"
+
+
+def _add_root(spec: mujoco.MjSpec, k: int, tilt_kp: float = TILT_KP) -> None:
+    """Six joints and force-limited position actuators on contactor ``k``'s attached root."""
+    root = spec.body(prefix(k) + ROOT)
     root.explicitinertial, root.mass = True, ROOT_MASS_KG
     root.inertia = [1e-5, 1e-5, 1e-5]
     axes = np.eye(3)[[0, 1, 2, 2, 0, 1]]
-    for k, (name, axis) in enumerate(zip(ROOT_JOINTS, axes, strict=True)):
-        slide = k < 3
+    for j, (name, axis) in enumerate(zip(ROOT_JOINTS, axes, strict=True)):
+        slide = j < 3
         kind = mujoco.mjtJoint.mjJNT_SLIDE if slide else mujoco.mjtJoint.mjJNT_HINGE
-        root.add_joint(name=f"press_{name}", type=kind, axis=axis, armature=0 if slide else 1e-3)
+        joint = f"{press_name(k)}_{name}"
+        root.add_joint(name=joint, type=kind, axis=axis, armature=0 if slide else 1e-3)
         kp = SLIDE_KP if slide else (YAW_KP if name == "yaw" else tilt_kp)
         act = spec.add_actuator(
-            name=f"press_{name}",
-            target=f"press_{name}",
+            name=joint,
+            target=joint,
             trntype=mujoco.mjtTrn.mjTRN_JOINT,
             forcelimited=mujoco.mjtLimited.mjLIMITED_TRUE,
             forcerange=[-1.0, 1.0],
@@ -94,45 +127,65 @@ def _add_root(spec: mujoco.MjSpec, tilt_kp: float = TILT_KP) -> None:
 
 
 def scene_spec(
-    part: Part, contactor: ContactorSpec, timestep_s: float, solver_iterations: int = 100
+    part: Part,
+    contactors: ContactorSpec | Sequence[ContactorSpec],
+    timestep_s: float,
+    solver_iterations: int = 100,
+    link_file: str | None = None,
 ) -> mujoco.MjSpec:
-    """The press scene spec: options (time step, s; the solver's iteration cap), the part, the
-    contactor under the ``press`` body."""
+    """The press scene spec: options (time step, s; the solver's iteration cap), the part (its
+    link mesh read from ``link_file`` when given, `sim.scene.link_mesh_file`), each contactor
+    under its press body."""
+    contactors = _as_list(contactors)
     spec = mujoco.MjSpec()
-    spec.modelname = f"{part.name}_press_{contactor.name}"
+    spec.modelname = f"{part.name}_press_{'_'.join(c.name for c in contactors)}"
     set_hand_options(spec, timestep_s)
     spec.option.iterations = int(solver_iterations)
     spec.option.gravity = [0.0, 0.0, 0.0]  # forces are the commanded ones
-    add_part(spec, part)
-    press = spec.worldbody.add_body(name="press")
-    spec.attach(contactor.spec.copy(), frame=press.add_frame(), prefix=PREFIX)
-    _add_root(spec, HAND_TILT_KP if contactor.kind == "hand" else TILT_KP)
+    add_part(spec, part, link_file=link_file)
+    for k, c in enumerate(contactors):
+        press = spec.worldbody.add_body(name=press_name(k))
+        spec.attach(c.spec.copy(), frame=press.add_frame(), prefix=prefix(k))
+        _add_root(spec, k, HAND_TILT_KP if c.kind == "hand" else TILT_KP)
     return spec
 
 
+def _as_list(contactors: ContactorSpec | Sequence[ContactorSpec]) -> list[ContactorSpec]:
+    return [contactors] if isinstance(contactors, ContactorSpec) else list(contactors)
+
+
 def build_press_scene(
-    part: Part, contactor: ContactorSpec, timestep_s: float, solver_iterations: int = 100
+    part: Part,
+    contactors: ContactorSpec | Sequence[ContactorSpec],
+    timestep_s: float,
+    solver_iterations: int = 100,
+    link_file: str | None = None,
 ) -> PressScene:
-    """Compile the press scene of ``contactor`` on ``part`` and index its named elements."""
-    model = scene_spec(part, contactor, timestep_s, solver_iterations).compile()
-    names = sorted(contactor.geom_labels)
+    """Compile the press scene of ``contactors`` (one or several) on ``part`` and index its
+    named elements."""
+    contactors = _as_list(contactors)
+    model = scene_spec(part, contactors, timestep_s, solver_iterations, link_file).compile()
+    names = [(k, n) for k, c in enumerate(contactors) for n in sorted(c.geom_labels)]
     readout = TaxelReadout(
-        model, f"{PART_PREFIX}tactile", f"{PART_PREFIX}skin", [PREFIX + n for n in names]
+        model, f"{PART_PREFIX}tactile", f"{PART_PREFIX}skin", [prefix(k) + n for k, n in names]
     )
     act = {model.actuator(i).name: i for i in range(model.nu)}
-    joint_act = {n[len(PREFIX) :]: i for n, i in act.items() if n.startswith(PREFIX)}
-    root_act = np.array([act[f"press_{n}"] for n in ROOT_JOINTS])
-    qadr = [model.jnt_qposadr[model.joint(f"press_{n}").id] for n in ROOT_JOINTS]
+    drives = []
+    for k, c in enumerate(contactors):
+        stem, pre = press_name(k), prefix(k)
+        joints = {n[len(pre) :]: i for n, i in act.items() if n.startswith(pre)}
+        root = np.array([act[f"{stem}_{n}"] for n in ROOT_JOINTS])
+        qadr = [model.jnt_qposadr[model.joint(f"{stem}_{n}").id] for n in ROOT_JOINTS]
+        tilt = HAND_TILT_LIMIT_NM if c.kind == "hand" else TILT_LIMIT_NM
+        drives.append(Drive(root, np.asarray(qadr), joints, model.body(stem).id, tilt))
     return PressScene(
         model,
         mujoco.MjData(model),
         readout,
-        np.array([contactor.geom_labels[n] for n in names], dtype=np.int64),
-        root_act,
-        np.asarray(qadr),
-        joint_act,
-        model.body("press").id,
-        HAND_TILT_LIMIT_NM if contactor.kind == "hand" else TILT_LIMIT_NM,
+        np.array([contactors[k].geom_labels[n] for k, n in names], dtype=np.int64),
+        np.array([k for k, _ in names], dtype=np.int64),
+        tuple(drives),
+        model.actuator_forcerange.copy(),
     )
 
 
@@ -185,47 +238,69 @@ def finger_fraction(plan: PressPlan, t: np.ndarray | float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Schedule:
-    """Controls at T ticks: root targets (T, 6), root force limits (T, 6), joint ctrl (T, J)."""
+    """Controls at T ticks: ``ctrl`` (T, nu) and ``forcerange`` (T, nu, 2), the whole rows of
+    `mjData.ctrl` and `mjModel.actuator_forcerange` at each tick (root targets, m and rad, and
+    force limits, N and N m; the contactor joints' targets, rad; every other actuator as
+    compiled), so that a tick is two copies."""
 
-    root_target: np.ndarray
-    root_limit: np.ndarray
-    joint_ctrl: np.ndarray
+    ctrl: np.ndarray
+    forcerange: np.ndarray
 
 
-def schedule(scene: PressScene, plan: PressPlan, times_s: np.ndarray) -> Schedule:
-    """The controls of ``plan`` at times (T,) s (after `reset` with the same plan)."""
-    target, limit = root_schedule(plan, times_s)
-    limit[:, 4:] = scene.tilt_limit_nm
-    frac = np.where(scene.plan_preshape[None, :], 1.0, finger_fraction(plan, times_s)[:, None])
-    return Schedule(target, limit, frac * scene.plan_target[None, :])
+def schedule(
+    scene: PressScene, plans: PressPlan | Sequence[PressPlan], times_s: np.ndarray
+) -> Schedule:
+    """The controls of the plans (one per drive) at times (T,) s (after `reset` with them)."""
+    plans = [plans] if isinstance(plans, PressPlan) else list(plans)
+    ctrl = np.zeros((len(times_s), scene.model.nu))
+    forcerange = np.repeat(scene.compiled_forcerange[None], len(times_s), axis=0)
+    for drive, plan in zip(scene.drives, plans, strict=True):
+        target, limit = root_schedule(plan, times_s)
+        limit[:, 4:] = drive.tilt_limit_nm
+        frac = finger_fraction(plan, times_s)[:, None]
+        frac = np.where(drive.plan_preshape[None, :], 1.0, frac)
+        ctrl[:, drive.root_act] = target
+        ctrl[:, drive.plan_act] = frac * drive.plan_target[None, :]
+        forcerange[:, drive.root_act, 0] = -limit
+        forcerange[:, drive.root_act, 1] = limit
+    return Schedule(ctrl, forcerange)
 
 
 def apply_tick(scene: PressScene, sched: Schedule, i: int) -> None:
-    """Write tick ``i`` of ``sched`` into ctrl and the root force limits."""
-    scene.data.ctrl[scene.root_act] = sched.root_target[i]
-    scene.model.actuator_forcerange[scene.root_act, 0] = -sched.root_limit[i]
-    scene.model.actuator_forcerange[scene.root_act, 1] = sched.root_limit[i]
-    scene.data.ctrl[scene.plan_act] = sched.joint_ctrl[i]
+    """Write tick ``i`` of ``sched`` into ctrl and the actuators' force limits."""
+    scene.data.ctrl[:] = sched.ctrl[i]
+    scene.model.actuator_forcerange[:] = sched.forcerange[i]
 
 
-def apply_controls(scene: PressScene, plan: PressPlan, t: float) -> None:
+def apply_controls(scene: PressScene, plans: PressPlan | Sequence[PressPlan], t: float) -> None:
     """Write the schedule at time ``t`` (s) into ctrl and the root force limits (after `reset`
-    with the same plan, which caches its joint targets on the scene)."""
-    apply_tick(scene, schedule(scene, plan, np.array([t])), 0)
+    with the same plans, which caches their joint targets on the scene)."""
+    apply_tick(scene, schedule(scene, plans, np.array([t])), 0)
 
 
-def reset(scene: PressScene, plan: PressPlan, pos_m: np.ndarray, quat: np.ndarray) -> None:
-    """Place ``press`` at the skin frame (pos (3,), quat (4,) w x y z) and start the episode."""
+def reset(
+    scene: PressScene,
+    plans: PressPlan | Sequence[PressPlan],
+    pos_m: np.ndarray | Sequence[np.ndarray],
+    quat: np.ndarray | Sequence[np.ndarray],
+) -> None:
+    """Place each press body at its skin frame (pos (3,) m, quat (4,) w x y z; one of each per
+    plan when there are several) and start the episode."""
+    single = isinstance(plans, PressPlan)
+    plans = [plans] if single else list(plans)
+    poses = [(pos_m, quat)] if single else list(zip(pos_m, quat, strict=True))
     m, d = scene.model, scene.data
-    m.body_pos[scene.press_body], m.body_quat[scene.press_body] = pos_m, quat
+    for drive, (pos, q) in zip(scene.drives, poses, strict=True):
+        m.body_pos[drive.press_body], m.body_quat[drive.press_body] = pos, q
     mujoco.mj_resetData(m, d)
-    names = list(plan.joint_targets)
-    scene.plan_act = np.array([scene.joint_act[n] for n in names], dtype=np.int64)
-    scene.plan_target = np.array([plan.joint_targets[n] for n in names], dtype=float)
-    scene.plan_preshape = np.array([n in plan.preshape for n in names], dtype=bool)
-    target, _ = root_controls(plan, 0.0)
-    d.qpos[scene.root_qpos] = target
-    # preshaped joints start at their targets: the hand arrives already shaped
-    held = scene.plan_act[scene.plan_preshape]
-    d.qpos[m.jnt_qposadr[m.actuator_trnid[held, 0]]] = scene.plan_target[scene.plan_preshape]
-    apply_controls(scene, plan, 0.0)
+    for drive, plan in zip(scene.drives, plans, strict=True):
+        names = list(plan.joint_targets)
+        drive.plan_act = np.array([drive.joint_act[n] for n in names], dtype=np.int64)
+        drive.plan_target = np.array([plan.joint_targets[n] for n in names], dtype=float)
+        drive.plan_preshape = np.array([n in plan.preshape for n in names], dtype=bool)
+        target, _ = root_controls(plan, 0.0)
+        d.qpos[drive.root_qpos] = target
+        # preshaped joints start at their targets: the hand arrives already shaped
+        held = drive.plan_act[drive.plan_preshape]
+        d.qpos[m.jnt_qposadr[m.actuator_trnid[held, 0]]] = drive.plan_target[drive.plan_preshape]
+    apply_controls(scene, plans, 0.0)

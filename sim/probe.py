@@ -23,6 +23,7 @@ import numpy as np
 
 from sim.episode_frames import SENSED_RADIUS_SPACINGS, contact_forces_n
 from sim.parts import Part
+from sim.readout import link_contacts
 from sim.scene import Contactor, SkinScene
 from sim.skin import SkinConfig, SkinInstance
 from tactile.errors import ConfigError
@@ -121,7 +122,8 @@ class ProbeRig:
         m, d, readout = self.scene.model, self.scene.data, self.scene.readout
         pressed = readout.positions_m(d, np.flatnonzero(depth_m > 0))
         radius = SENSED_RADIUS_SPACINGS * self.skin.spacing_m
-        return contact_forces_n(m, d, readout.link_body, pressed, radius)[1]
+        contacts = link_contacts(m, d, readout.link_body)
+        return contact_forces_n(m, d, contacts, pressed, radius)[1]
 
     def press(
         self,

@@ -105,6 +105,40 @@ class ReadoutFrame:
     label: np.ndarray
 
 
+@dataclass(frozen=True)
+class LinkContacts:
+    """The contacts between the link and anything else: ``index`` (C,) int64 into
+    `mjData.contact`, ``other_geom`` (C,) int64 the geom on the other side."""
+
+    index: np.ndarray
+    other_geom: np.ndarray
+
+
+def link_contacts(model: mujoco.MjModel, data: mujoco.MjData, link_body: int) -> LinkContacts:
+    """The contacts with exactly one side on the weld body ``link_body``."""
+    pairs = np.asarray(data.contact.geom[: data.ncon]).reshape(-1, 2)
+    on_link = model.body_weldid[model.geom_bodyid[pairs]] == link_body
+    index = np.flatnonzero(on_link[:, 0] != on_link[:, 1])
+    other = np.where(on_link[index, 0], pairs[index, 1], pairs[index, 0])
+    return LinkContacts(index, other)
+
+
+@dataclass(frozen=True)
+class ContactSnapshot:
+    """The state attribution needs, kept per frame so that only the selected frame is attributed.
+
+    active : (K,) int64 pressed taxels; points_m : (K, 3) their world positions, m;
+    candidates : (C,) int64 readout contactors touching the link; xpos (C, 3) m, xmat (C, 9):
+    their geom poses.
+    """
+
+    active: np.ndarray
+    points_m: np.ndarray
+    candidates: np.ndarray
+    xpos: np.ndarray
+    xmat: np.ndarray
+
+
 class TaxelReadout:
     """Reads depth, taxel positions and attribution for one sensor mesh geom of a compiled model.
 
@@ -150,32 +184,50 @@ class TaxelReadout:
         local = self.local_m if idx is None else self.local_m[idx]
         return world_points(local, data.geom_xpos[self.skin_geom], data.geom_xmat[self.skin_geom])
 
-    def touching(self, model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+    def touching(
+        self, model: mujoco.MjModel, data: mujoco.MjData, contacts: LinkContacts | None = None
+    ) -> np.ndarray:
         """(K,) bool: which contactors are in contact with the sensor's weld body."""
-        pairs = np.asarray(data.contact.geom[: data.ncon]).reshape(-1, 2)
-        on_link = model.body_weldid[model.geom_bodyid[pairs]] == self.link_body
-        other = np.where(on_link[:, 0], pairs[:, 1], pairs[:, 0])[on_link.any(axis=1)]
-        return np.isin(self.geoms, other)
+        contacts = contacts or link_contacts(model, data, self.link_body)
+        return np.isin(self.geoms, contacts.other_geom)
 
-    def penetration_m(self, data: mujoco.MjData, points_m: np.ndarray, k: np.ndarray) -> np.ndarray:
-        """Penetration (len(k), K) m of contactors k at world points (K, 3)."""
-        out = np.empty((len(k), points_m.shape[0]))
-        for row, c in enumerate(k):
-            g = self.geoms[c]
-            sd = signed_distance(
-                self._types[c], self._sizes[c], data.geom_xpos[g], data.geom_xmat[g], points_m
+    def snapshot(
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        depth_m: np.ndarray,
+        contacts: LinkContacts | None = None,
+    ) -> ContactSnapshot:
+        """What attribution needs of the current state, copied: the pressed taxels (depth > 0),
+        their world positions and the poses of the contactors touching the link."""
+        active = np.flatnonzero(depth_m > 0)
+        cand = np.flatnonzero(self.touching(model, data, contacts)) if active.size else active
+        g = self.geoms[cand]
+        return ContactSnapshot(
+            active,
+            self.positions_m(data, active),
+            cand,
+            np.array(data.geom_xpos[g]),
+            np.array(data.geom_xmat[g]),
+        )
+
+    def attribute(self, snap: ContactSnapshot) -> np.ndarray:
+        """(N,) int64: per taxel, the index of the contactor penetrating it deepest, -1 none."""
+        who = np.full(self.n_taxels, -1, dtype=np.int64)
+        if not (snap.active.size and snap.candidates.size):
+            return who
+        pen = np.empty((len(snap.candidates), len(snap.active)))
+        for row, c in enumerate(snap.candidates):
+            pen[row] = -signed_distance(
+                self._types[c], self._sizes[c], snap.xpos[row], snap.xmat[row], snap.points_m
             )
-            out[row] = -sd
-        return out
+        best = np.argmax(pen, axis=0)
+        deepest = pen[best, np.arange(snap.active.size)]
+        who[snap.active] = np.where(deepest > 0, snap.candidates[best], -1)
+        return who
 
     def read(self, model: mujoco.MjModel, data: mujoco.MjData) -> ReadoutFrame:
         """Depth and attribution for the current state (after mj_forward or mj_step)."""
         depth = self.depth_m(data)
-        who = np.full(self.n_taxels, -1, dtype=np.int64)
-        active = np.flatnonzero(depth > 0)
-        cand = np.flatnonzero(self.touching(model, data))
-        if active.size and cand.size:
-            pen = self.penetration_m(data, self.positions_m(data, active), cand)
-            best = np.argmax(pen, axis=0)
-            who[active] = np.where(pen[best, np.arange(active.size)] > 0, cand[best], -1)
+        who = self.attribute(self.snapshot(model, data, depth))
         return ReadoutFrame(depth, who, self.labels[who])

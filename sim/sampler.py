@@ -24,6 +24,7 @@ from sim.episode import EpisodeContext, Maker, run_sample
 from sim.gen_config import GenerateConfig, is_mesh_path
 from sim.generate_hands import hand_maker
 from sim.hand import HandConfig
+from sim.mix import SecondContact, is_mix_index
 from sim.nonhand import sample_nonhand
 from sim.parts import W0_REGION, W0_TILING, Part, custom_part, get_part
 from sim.subjects import Subject, sample_subjects
@@ -44,6 +45,8 @@ class WorkerState:
     subjects: list[Subject]
     hand: Maker
     nonhand: Maker
+    mix_hand: Maker | None = None  # a hand and a second contact (`sim.mix`), when mixing
+    mix_nonhand: Maker | None = None
 
 
 _STATE: WorkerState | None = None
@@ -79,9 +82,12 @@ def scaled(make: Maker, factor: float) -> Maker:
     if factor == 1.0:
         return make
 
-    def make_scaled(rng: np.random.Generator) -> tuple[ContactorSpec, PressPlan]:
+    def scale(plan: PressPlan) -> PressPlan:
+        return replace(plan, durations_s=tuple(d * factor for d in plan.durations_s))
+
+    def make_scaled(rng: np.random.Generator) -> tuple[ContactorSpec | list, PressPlan | list]:
         spec, plan = make(rng)
-        return spec, replace(plan, durations_s=tuple(d * factor for d in plan.durations_s))
+        return spec, [scale(p) for p in plan] if isinstance(plan, list) else scale(plan)
 
     return make_scaled
 
@@ -90,14 +96,16 @@ def build_state(cfg: GenerateConfig, ctx: EpisodeContext | None = None) -> Worke
     """A worker's state for ``cfg`` (``ctx`` reused when given, e.g. the parent's)."""
     ctx = ctx or EpisodeContext(cfg.episode, part=build_part(cfg))
     subjects = subject_pool(cfg)
-    k = cfg.instances_per_kind
-    return WorkerState(
-        cfg,
-        ctx,
-        subjects,
-        hand=scaled(hand_maker(subjects, ctx), cfg.duration_scale),
-        nonhand=scaled(lambda rng: sample_nonhand(rng, k), cfg.duration_scale),
-    )
+    k, factor = cfg.instances_per_kind, cfg.duration_scale
+    hand, nonhand = hand_maker(subjects, ctx), lambda rng: sample_nonhand(rng, k)
+    state = WorkerState(cfg, ctx, subjects, scaled(hand, factor), scaled(nonhand, factor))
+    if cfg.mix.fraction > 0:
+        m = cfg.mix
+        weights = (m.same_person, m.two_people, m.hand_object, m.hand_body)
+        second = SecondContact(ctx, subjects, k, weights, m.min_gap_mm, cfg.seed)
+        state.mix_hand = scaled(second.maker(hand), factor)
+        state.mix_nonhand = scaled(second.maker(nonhand), factor)
+    return state
 
 
 def init_worker(cfg: GenerateConfig, ctx: EpisodeContext | None = None) -> None:
@@ -105,6 +113,13 @@ def init_worker(cfg: GenerateConfig, ctx: EpisodeContext | None = None) -> None:
     global _STATE
     if _STATE is None or _STATE.cfg != cfg:
         _STATE = build_state(cfg, ctx)
+
+
+def current_state() -> WorkerState:
+    """This process's worker state (RuntimeError before `init_worker`)."""
+    if _STATE is None:
+        raise RuntimeError("worker state used before init_worker(cfg)")
+    return _STATE
 
 
 def pad_sequence(sample: Sample, frames: int) -> Sample:
@@ -119,11 +134,21 @@ def pad_sequence(sample: Sample, frames: int) -> Sample:
     return sample | {"seq_raw": out}
 
 
+def maker_at(i: int, state: WorkerState) -> Maker:
+    """The maker of sample ``i``: hands at `is_hand_index`, non-hands elsewhere; with a second
+    contact at `sim.mix.is_mix_index` when the dataset mixes."""
+    hand = is_hand_index(i, state.cfg.hand_fraction)
+    if state.mix_hand is not None and is_mix_index(i, state.cfg.seed, state.cfg.mix.fraction):
+        return state.mix_hand if hand else state.mix_nonhand
+    return state.hand if hand else state.nonhand
+
+
 def sample_at(i: int, state: WorkerState) -> tuple[Sample, Counter]:
     """Sample ``i`` of the dataset and its reject counts by reason."""
     cfg = state.cfg
-    make = state.hand if is_hand_index(i, cfg.hand_fraction) else state.nonhand
-    sample, rejects = run_sample(i, cfg.seed, state.ctx, make, cfg.keep_sequences)
+    several = cfg.mix.fraction > 0
+    make = maker_at(i, state)
+    sample, rejects = run_sample(i, cfg.seed, state.ctx, make, cfg.keep_sequences, several)
     if cfg.keep_sequences:
         sample = pad_sequence(sample, cfg.sequence_frames)
     return sample, rejects

@@ -13,8 +13,12 @@ mocap contactor pressing a fixed (or mocap) link gives no contact and no tactile
 
 from __future__ import annotations
 
+import hashlib
+import os
+import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -148,6 +152,34 @@ def add_part(
         )
         act.set_to_position(kp=2000.0, kv=20.0)
     return body
+
+
+def link_mesh_file(part: Part) -> str | None:
+    """Path of ``part``'s link mesh as an OBJ file, written once per machine and content.
+
+    MuJoCo's compiler caches meshes read from files, not inline ones: a press scene that names
+    the link by file compiles in 2-8 ms instead of 20-30 ms, to the same model (the vertices are
+    written as the float32 values MuJoCo stores, in order; tests/sim/test_scenes.py compares
+    the compiled arrays). None when no temporary folder is writable (the caller inlines it).
+    """
+    verts = np.ascontiguousarray(part.link.vertices, dtype=np.float32)
+    faces = np.ascontiguousarray(part.link.faces, dtype=np.int64)
+    digest = hashlib.sha256(verts.tobytes() + faces.tobytes()).hexdigest()[:20]
+    folder = Path(tempfile.gettempdir()) / f"handskin-meshes-{os.getuid()}"
+    path = folder / f"link-{digest}.obj"
+    if path.is_file():
+        return str(path)
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in verts.astype(float).tolist()]
+    lines += [f"f {a} {b} {c}" for a, b, c in (faces + 1).tolist()]
+    try:
+        folder.mkdir(mode=0o700, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=folder, suffix=".obj.tmp")
+        with os.fdopen(fd, "w") as f:
+            f.write("\n".join(lines) + "\n")
+        os.replace(tmp, path)  # atomic: a concurrent worker reads a whole file or none
+    except OSError:
+        return None
+    return str(path)
 
 
 def add_contactor(spec: mujoco.MjSpec, c: Contactor, prefix: str = CONTACTOR_PREFIX):

@@ -16,6 +16,7 @@ from tactile.dataset.h5io import atomic_path
 from tactile.dataset.manifest import claim_folder, differing_keys, read_manifest
 from tactile.dataset.merge import merge_chunks
 from tactile.errors import ConfigError, DataError
+from tactile.files import remove_stale, writing
 
 
 def parse_shard(text: str) -> tuple[int, int]:
@@ -50,14 +51,34 @@ def merge_shards(shards: Sequence[str | Path], out: str | Path) -> Path:
                 f"{d} is a shard of another dataset than {dirs[0]} (differing keys: "
                 f"{', '.join(keys) or 'part/seed/generator_version'}); not merged"
             )
-    claim_folder(out, manifests[0])
-    (out / CHUNKS).mkdir(exist_ok=True)
+    with writing(out / CHUNKS):
+        claim_folder(out, manifests[0])
+        (out / CHUNKS).mkdir(exist_ok=True)
+    remove_stale(out / CHUNKS)  # chunk copies of a merge that was killed
     for d in dirs:
         names = [STATIC] + [chunk_path(d, k).name for k in list_chunks(d)]
         for name in names:
             src, dst = d / CHUNKS / name, out / CHUNKS / name
             if src.exists() and not dst.exists():
-                with atomic_path(dst) as tmp:
+                with writing(dst, fix="free space there and merge again"), atomic_path(dst) as tmp:
                     shutil.copyfile(src, tmp)
     cfg = manifests[0]["config"]
-    return merge_chunks(out, n_chunks=-(-cfg["n"] // cfg["chunk_size"]))
+    whole = "n" in cfg and "chunk_size" in cfg  # a generated run's chunk count (not ingest's)
+    try:
+        return merge_chunks(out, n_chunks=-(-cfg["n"] // cfg["chunk_size"]) if whole else None)
+    except DataError as err:
+        raise _name_source(err, out, dirs) from None
+
+
+def _name_source(err: DataError, out: Path, dirs: list[Path]) -> DataError:
+    """``err`` naming the shard a damaged chunk was copied from (the copy is byte-exact)."""
+    for d in dirs:
+        for k in list_chunks(d):
+            copy, src = chunk_path(out, k), chunk_path(d, k)
+            if f"{copy}:" in str(err) and src != copy:
+                what = str(err).split(" Fix: ")[0]
+                return DataError(
+                    f"{what} It is a byte-exact copy of {src}. Fix: delete both, rerun that "
+                    f"shard's handskin generate --out {d} --shard ..., then merge again"
+                )
+    return err

@@ -22,13 +22,14 @@ from sim.episode import (
     FRAME_DT_S,
     SENSOR_BIT,
     EpisodeContext,
+    as_list,
     episode_rng,
-    site_pose,
+    start_episode,
 )
 from sim.episode_frames import read_frame, sensed_pressure
 from sim.gen_config import GenerateConfig
 from sim.parts import Part
-from sim.sampler import build_state, is_hand_index, sample_at
+from sim.sampler import build_state, maker_at, sample_at
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,7 @@ class GeomShape:
     pos_m: np.ndarray
     rot: np.ndarray
     label: int
+    contact: int = 0  # which of the sample's contactors (0 for the first)
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,13 +64,13 @@ class ViewScene:
 
 
 def contactor_geoms(
-    model: mujoco.MjModel, data: mujoco.MjData, geom_labels: dict[str, int]
+    model: mujoco.MjModel, data: mujoco.MjData, geom_labels: dict[str, int], contact: int = 0
 ) -> tuple[GeomShape, ...]:
-    """The collision geoms of the attached contactor (names ``press.PREFIX + key``) as placed in
-    ``data`` (after mj_forward / mj_step)."""
+    """The collision geoms of attached contactor ``contact`` (names ``press.prefix(contact) +
+    key``) as placed in ``data`` (after mj_forward / mj_step)."""
     shapes = []
     for name, label in sorted(geom_labels.items()):
-        g = model.geom(press.PREFIX + name).id
+        g = model.geom(press.prefix(contact) + name).id
         kind = mujoco.mjtGeom(model.geom_type[g]).name.removeprefix("mjGEOM_").lower()
         shapes.append(
             GeomShape(
@@ -77,6 +79,7 @@ def contactor_geoms(
                 data.geom_xpos[g].copy(),
                 data.geom_xmat[g].reshape(3, 3).copy(),
                 int(label),
+                contact,
             )
         )
     return tuple(shapes)
@@ -86,24 +89,25 @@ def replay_geoms(
     ctx: EpisodeContext, contactor, plan, rng: np.random.Generator, frame_index: int
 ) -> tuple[tuple[GeomShape, ...], np.ndarray]:
     """Re-run an episode as `sim.episode.run_episode` does (same rng state after ``make``) up to
-    frame ``frame_index`` (0-based, 10 Hz) and return (contactor geoms, pressure (N,) Pa there).
+    frame ``frame_index`` (0-based, 10 Hz) and return (contactor geoms, pressure (N,) Pa there);
+    ``contactor`` and ``plan`` may be lists (several contacts).
 
     The pressure lets the caller check the replay against the stored sample."""
-    scene = ctx.scene(contactor)
+    start = start_episode(ctx, contactor, plan, rng)
+    scene, contactors, plans = start.scene, as_list(contactor), as_list(plan)
     m, d = scene.model, scene.data
-    _, pos, quat = site_pose(ctx, plan, rng)
-    press.reset(scene, plan, pos, quat)
     n_ctrl = max(1, round(CONTROL_DT_S / m.opt.timestep))
     per_frame = round(FRAME_DT_S / CONTROL_DT_S)
     for k in range(frame_index + 1):
         m.opt.disableflags |= SENSOR_BIT
         for j in range(per_frame):
-            press.apply_controls(scene, plan, (k * per_frame + j) * CONTROL_DT_S)
+            press.apply_controls(scene, plans, (k * per_frame + j) * CONTROL_DT_S)
             mujoco.mj_step(m, d, nstep=n_ctrl)
         m.opt.disableflags &= ~SENSOR_BIT
         mujoco.mj_forward(m, d)
     frame = read_frame(scene, ctx.skin, ctx.cfg.active_pa, (frame_index + 1) * FRAME_DT_S)
-    return contactor_geoms(m, d, contactor.geom_labels), frame.pressure_pa
+    geoms = [contactor_geoms(m, d, c.geom_labels, k) for k, c in enumerate(contactors)]
+    return tuple(g for shapes in geoms for g in shapes), frame.pressure_pa
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,9 +126,8 @@ def simulate_scene(cfg: GenerateConfig, index: int) -> Simulated:
     Raises RuntimeError if the replayed frame's pressure differs from the sample's (> 1 Pa)."""
     state = build_state(cfg)
     sample, rejects = sample_at(index, state)
-    make = state.hand if is_hand_index(index, cfg.hand_fraction) else state.nonhand
     rng, _ = episode_rng(cfg.seed, index, sum(rejects.values()))
-    contactor, plan = make(rng)
+    contactor, plan = maker_at(index, state)(rng)
     frame_index = round(float(sample["time_s"]) / FRAME_DT_S) - 1
     geoms, pressure = replay_geoms(state.ctx, contactor, plan, rng, frame_index)
     if np.abs(pressure - sample["pressure_pa"]).max() > 1.0:
@@ -134,7 +137,7 @@ def simulate_scene(cfg: GenerateConfig, index: int) -> Simulated:
         sample["pressure_pa"].astype(np.float64),
         sample["taxel_label"].astype(np.int64),
         geoms,
-        contactor.kind,
+        " + ".join(c.kind for c in as_list(contactor)),
         caption(sample, index),
     )
     return Simulated(scene, sample, state.ctx)
@@ -154,7 +157,10 @@ def sequence_pressure(ctx: EpisodeContext, seq_raw: np.ndarray, length: int) -> 
 
 def caption(sample: dict, index: int) -> str:
     """``#i kind name, F N`` from a sample dict's ``contactor`` JSON and ``force_n``."""
-    desc = json.loads(str(sample.get("contactor", "{}")) or "{}")
-    name = desc.get("subject") or desc.get("type") or desc.get("name", "")
+    descs = json.loads(str(sample.get("contactor", "{}")) or "{}")
+    names = []
+    for desc in descs if isinstance(descs, list) else [descs]:
+        name = desc.get("subject") or desc.get("type") or desc.get("name", "")
+        names.append(f"{desc.get('kind', '')} {name}".strip())
     force = float(sample.get("force_n", np.nan))
-    return f"#{index} {desc.get('kind', '')} {name}, {force:.1f} N".strip()
+    return f"#{index} {' + '.join(names)}, {force:.1f} N".strip()

@@ -20,6 +20,7 @@ from PIL import Image
 from tactile.config import from_dict
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, DataError, HandskinError, require_positive
+from tactile.files import os_error_text, require_writable, save_image
 from tactile.labels import backproject, check_labels
 
 COLORS = ("pressure", "label", "prediction")  # sim.render.COLORS, which loads pyvista
@@ -132,9 +133,7 @@ def write_outputs(scene, tmap, sample, seq, opts: dict) -> list[Path]:
             "--prediction-png instead of --png"
         )
     if opts["png"]:
-        opts["png"].parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(view).save(opts["png"])
-        out.append(opts["png"])
+        out.append(save_image(Image.fromarray(view), opts["png"]))
     if opts["panel"]:
         title = scene.title if scene is not None else ""
         fig = figures.sample_panel(
@@ -274,10 +273,16 @@ def view_command(
             raise ConfigError("--color prediction needs --pred FILE.npy (predicted classes)")
         require_positive("--width", width, "pixels")
         require_positive("--height", height, "pixels")
+        if seed < 0:
+            raise ConfigError(f"--seed {seed} is out of range; allowed >= 0")
         if interactive and not has_display():
             raise ConfigError("--interactive needs a display (DISPLAY unset); write --png instead")
         if not (png or panel or sequence or interactive or prediction_png):
             png = Path("out/view.png")
+        outputs = {"--png": png, "--panel": panel, "--sequence": sequence}
+        for flag, path in (outputs | {"--prediction-png": prediction_png}).items():
+            if path is not None:
+                require_writable(path, flag)
         if dataset is not None:
             scene, tmap, smp, seq = from_dataset(dataset, sample)
         else:
@@ -298,6 +303,8 @@ def view_command(
         written = write_outputs(scene, tmap, smp, seq, opts)
     except (HandskinError, KeyError, ValueError) as err:
         raise _fail(err) from err
+    except OSError as err:  # a full disk while writing the figures
+        raise _fail(ValueError(os_error_text(err))) from err
     for path in written:
         typer.echo(f"written: {path}")
 

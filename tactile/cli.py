@@ -11,6 +11,7 @@ import numpy as np
 import typer
 
 from tactile.errors import ConfigError, HandskinError, require_positive
+from tactile.files import atomic_path, require_writable, writing
 from tactile.layout import TaxelLayout
 from tactile.synthetic import cylinder_sector_layout
 from tactile.tactile_map import TactileMap
@@ -60,6 +61,11 @@ def map_command(
             require_positive("--step-mm", step_mm, "mm/pixel")
             if units not in (None, "m", "mm"):
                 raise ConfigError(f"--units {units!r} unknown; choose m or mm")
+            if out is not None and out.suffix != ".npz":
+                raise ConfigError(f"--out {out}: name the map file with a .npz suffix")
+            for flag, path in (("--out", out), ("--png", png)):
+                if path is not None:
+                    require_writable(path, flag)
             lay = _load_layout(layout, units)
             tmap = TactileMap.build(lay, step_mm=step_mm)
     except HandskinError as err:
@@ -68,14 +74,20 @@ def map_command(
     for w in caught:
         typer.echo(f"warning: {w.message}", err=True)
     typer.echo(describe_map(tmap))
-    if out is not None:
-        tmap.save(out)
-        typer.echo(f"map saved to {out}")
-    if png is not None:
-        from tactile.plot import save_map_picture  # start-up: matplotlib
+    try:
+        if out is not None:
+            with writing(out), atomic_path(out, keep_suffix=True) as tmp:
+                tmap.save(tmp)
+            typer.echo(f"map saved to {out}")
+        if png is not None:
+            from tactile.plot import save_map_picture  # start-up: matplotlib
 
-        save_map_picture(tmap, png, title=lay.name)
-        typer.echo(f"picture written to {png}")
+            with writing(png):
+                save_map_picture(tmap, png, title=lay.name)
+            typer.echo(f"picture written to {png}")
+    except HandskinError as err:
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(2) from err
 
 
 def _load_layout(path: Path | None, units: str | None):

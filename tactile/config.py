@@ -132,6 +132,29 @@ def load_config(path: str | Path, cls: type[T]) -> T:
         raise ConfigError(f"{path}: {err}") from err
 
 
+#: Field metadata of an option added after datasets were first made: a dataset's record of its
+#: configuration (`record`) holds it only when it differs from its default, so a dataset made
+#: without the option keeps its bytes.
+RECORD_WHEN_SET = {"record": "when set"}
+
+
+def record(cfg: Any) -> Any:
+    """``dataclasses.asdict(cfg)`` without the `RECORD_WHEN_SET` fields left at their default."""
+    if not dataclasses.is_dataclass(cfg) or isinstance(cfg, type):
+        return cfg
+    out = {}
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        if f.metadata.get("record") == "when set" and value == _default(f):
+            continue
+        out[f.name] = record(value)
+    return out
+
+
+def _default(f: dataclasses.Field) -> Any:
+    return f.default_factory() if f.default is dataclasses.MISSING else f.default  # type: ignore[misc]
+
+
 def to_dict(cfg: Any) -> dict[str, Any]:
     """A JSON-able dict of a (nested) dataclass; tuples become lists."""
     return json.loads(json.dumps(dataclasses.asdict(cfg), default=list))

@@ -23,6 +23,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 from PIL import Image
 
+from tactile import files
 from tactile.errors import MapError
 from tactile.labels import CLASS_NAMES, PALETTE, part_summary
 from tactile.sheet import overlay
@@ -54,11 +55,8 @@ def trim_background(rgb: np.ndarray, pad_px: int = 6) -> np.ndarray:
 
 
 def save_figure(fig: Figure, path: str | Path, dpi: float = 100) -> Path:
-    """Write ``fig`` to ``path`` (PNG), creating the folder. Returns the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    return path
+    """Write ``fig`` to ``path`` (PNG) atomically, creating the folder. Returns the path."""
+    return files.save_figure(fig, path, dpi=dpi)
 
 
 def palette_legend(fig: Figure, ncols: int = 6) -> None:
@@ -199,9 +197,8 @@ def save_sequence_gif(
     """Animated GIF of (T, H, W) uint8 tactile images at ``fps`` frames/s (10 Hz = real time),
     each pixel enlarged ``scale`` times; loops forever. Returns the path."""
     frames = [Image.fromarray(f) for f in sequence_frames_rgb(images, scale)]
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    frames[0].save(
+    return files.save_image(
+        frames[0],
         path,
         save_all=True,
         append_images=frames[1:],
@@ -209,7 +206,6 @@ def save_sequence_gif(
         duration=round(1000.0 / fps),
         optimize=True,
     )
-    return path
 
 
 def error_picture(image: np.ndarray, true: np.ndarray, pred: np.ndarray) -> np.ndarray:

@@ -104,7 +104,7 @@ def label_image(
     classes = np.union1d([0], lab[p > 0])
     fields = np.where(lab[None, :] == classes[:, None], p[None, :], 0.0)
     rows, cols = _grown_box(foreground, dilate_px)
-    interpolated = tmap.interpolate(fields)[:, rows, cols]
+    interpolated = tmap.interpolate_box(fields, rows, cols)
     spread = dilate(np.ascontiguousarray(interpolated), dilate_px)
     out[rows, cols] = np.where(foreground[rows, cols], classes[spread.argmax(axis=0)], 0)
     return out
@@ -174,6 +174,57 @@ def backproject(tmap, seg: np.ndarray, *, radius_mm: float | None = None) -> np.
     best = counts.argmax(axis=0) + 1  # (N, B)
     out = np.where(counts.max(axis=0) > 0, best, 0).T.astype(np.uint8)
     return out[0] if seg.ndim == 2 else out
+
+
+# m: pressed taxels closer than this belong to one contact: a hand's fingers and palm stay one
+# (on two-contact forearm samples 50 mm separated the contacts best; docs/learning.md)
+CONTACT_GAP_M = 0.05
+MIN_CONTACT_TAXELS = 3  # taxels: a smaller group of pressed taxels is read noise
+
+
+def contact_instances(
+    positions_m: np.ndarray,
+    p: np.ndarray,
+    *,
+    threshold: float = 0.0,
+    gap_m: float = CONTACT_GAP_M,
+    min_taxels: int = MIN_CONTACT_TAXELS,
+) -> np.ndarray:
+    """Which contact each pressed taxel belongs to: the groups of taxels above ``threshold``
+    linked by chains of taxels less than ``gap_m`` apart on the skin (3D, so a seam of the map
+    splits nothing). A hand's fingers and palm lie within a finger's gap of each other; two
+    hands or a hand and an object pressing apart are two contacts.
+
+    Parameters
+    ----------
+    positions_m : (N, 3) float, m. p : (N,) float pressures. threshold : same unit as p.
+    gap_m : float, m. min_taxels : groups of fewer pressed taxels are read noise, not a contact.
+
+    Returns
+    -------
+    instances : (N,) int64 — 0 for a taxel not pressed (or in a group under ``min_taxels``),
+        else 1..K, contact 1 with the largest summed pressure.
+    """
+    from scipy.sparse.csgraph import connected_components  # start-up: scipy.sparse.csgraph
+    from scipy.spatial import cKDTree  # start-up: scipy.spatial
+
+    p = np.asarray(p, dtype=np.float64)
+    pressed = np.flatnonzero(p > threshold)
+    out = np.zeros(len(p), np.int64)
+    if not pressed.size:
+        return out
+    pairs = cKDTree(np.asarray(positions_m)[pressed]).query_pairs(gap_m, output_type="ndarray")
+    graph = sp.coo_matrix(
+        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(pressed.size,) * 2
+    )
+    _, group = connected_components(graph, directed=False)
+    load = np.bincount(group, weights=p[pressed])
+    load[np.bincount(group) < min_taxels] = -1.0  # noise: dropped below
+    rank = np.zeros(len(load), dtype=np.int64)
+    kept = np.argsort(-load, kind="stable")[: int((load >= 0).sum())]
+    rank[kept] = np.arange(1, len(kept) + 1)
+    out[pressed] = rank[group]
+    return out
 
 
 def part_summary(

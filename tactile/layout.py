@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from tactile.errors import LayoutError, MapError
-from tactile.layout_io import read_layout, write_layout
+from tactile.layout_io import MAX_TAXELS, read_layout, write_layout
 
 NORMAL_TOLERANCE = 1e-3  # |1 - |n|| below this is rounding and gets normalised; above, an error
 COLLINEAR_RTOL = 1e-7  # RMS spread off the main axis, relative to the extent, below which = a line
@@ -164,6 +164,11 @@ class TaxelLayout:
 
     def __post_init__(self) -> None:
         pos = _float_matrix(self.positions_m, "positions_m", None)
+        if len(pos) > MAX_TAXELS:
+            raise LayoutError(
+                f"{len(pos):,} taxels: more than the {MAX_TAXELS:,} a tactile map is built for "
+                "(about a minute at 100,000). Fix: split the skin into parts"
+            )
         check_spread(pos)
         n = pos.shape[0]
         normals = None

@@ -6,16 +6,14 @@ float, m; optional ``normals``, ``module_ids``, ``channel_ids``, ``merged_channe
 ``n_channels``; ``name``), which validates them; a writer takes the same fields as a mapping.
 `TaxelLayout.load` and `TaxelLayout.save` are the entry points.
 
-Every error is a LayoutError naming the file, the 1-based line when there is one, and the fix.
+Every error is a LayoutError naming the file, the 1-based line when there is one, and the fix;
+a missing or binary file, or one of more than ``MAX_TAXELS`` rows, is refused before parsing.
 Writes are atomic (temporary file in the same folder, then ``os.replace``).
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
 import re
-import tempfile
 import warnings
 from collections.abc import Callable, Mapping
 from os import PathLike
@@ -25,7 +23,12 @@ from typing import IO, Any
 import numpy as np
 
 from tactile.errors import LayoutError
+from tactile.files import atomic_path, count_lines, require_input, text_lines
 
+# Taxels a layout may hold. A tactile map's build time grows faster than its taxel count (about a
+# minute at 100,000 taxels, measured with TactileMap.build), and robot skins hold thousands (the
+# iCub's whole body about 4,000): a larger file is almost surely not one row per taxel.
+MAX_TAXELS = 100_000
 FORMAT_VERSION = 1
 CSV_MAGIC = f"# handskin taxel layout v{FORMAT_VERSION}"
 UNIT_SCALE = {"m": 1.0, "mm": 1e-3}  # metres per file unit
@@ -42,11 +45,24 @@ def read_layout(path: str | PathLike[str], *, units: str | None = None) -> Field
     """The layout fields in ``path``, dispatching on the suffix (see `TaxelLayout.load`)."""
     path = Path(path)
     if units is not None and units not in UNIT_SCALE:
-        raise LayoutError(f"{path}: unknown units={units!r}; accepted units: m, mm")
+        raise LayoutError(f"{path}: unknown unit {units!r} (--units); accepted units: m, mm")
     readers = {".npz": read_npz, ".csv": read_csv, ".txt": read_txt}
     if path.suffix.lower() not in readers:
         raise LayoutError(f"{path}: unknown suffix {path.suffix!r}; {SUFFIX_HELP}")
+    require_input(path, "layout", LayoutError)
+    lines = 0 if path.suffix.lower() == ".npz" else count_lines(path)
+    if lines > MAX_TAXELS + 1000:
+        too_many(path, f"{lines:,} lines")
     return readers[path.suffix.lower()](path, units)
+
+
+def too_many(path: Path | str, found: str) -> None:
+    """LayoutError: the layout holds more than MAX_TAXELS taxels (``found`` says how many)."""
+    raise LayoutError(
+        f"{path}: {found}, more than the {MAX_TAXELS:,} taxels handskin maps (a tactile map "
+        "takes about a minute to build at 100,000 taxels, and robot skins hold thousands). "
+        "Fix: check that the file has one row per taxel, or split the skin into parts"
+    )
 
 
 def write_layout(layout: Mapping[str, Any], path: str | PathLike[str]) -> None:
@@ -63,19 +79,15 @@ def write_layout(layout: Mapping[str, Any], path: str | PathLike[str]) -> None:
 
 
 def _atomic_write(path: Path, mode: str, write: Callable[[IO[Any]], object]) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as fh:
-            write(fh)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+    with (
+        atomic_path(path) as tmp,
+        open(tmp, mode, **({} if "b" in mode else {"encoding": "utf-8"})) as fh,
+    ):
+        write(fh)
 
 
 def _numbered_lines(path: Path) -> Lines:
-    return list(enumerate(path.read_text(encoding="utf-8").splitlines(), start=1))
+    return list(enumerate(text_lines(path, "layout", LayoutError), start=1))
 
 
 def _floats(path: Path, line: int, tokens: list[str], what: str, count: int = 0) -> np.ndarray:
@@ -117,18 +129,23 @@ def write_npz(layout: Mapping[str, Any], fh: IO[bytes]) -> None:
 def read_npz(path: Path, units: str | None) -> Fields:
     """Read a file written by `write_npz` (always metres)."""
     if units not in (None, "m"):
-        raise LayoutError(f"{path}: .npz layouts are in metres; drop units={units!r}")
+        raise LayoutError(f"{path}: .npz layouts are in metres; leave out --units {units}")
     try:
         with np.load(path, allow_pickle=False) as data:
             fields = {key: data[key] for key in data.files}
     except (OSError, ValueError) as err:
-        raise LayoutError(f"{path}: not a readable .npz layout ({err}). Fix: re-save it") from None
+        why = "not a NumPy .npz archive" if "pickle" in str(err) else str(err).splitlines()[0]
+        raise LayoutError(
+            f"{path}: not a readable .npz layout ({why}). Fix: save it with TaxelLayout.save"
+        ) from None
     version = int(fields.pop("format_version", -1))
     if version != FORMAT_VERSION or "positions_m" not in fields:
         raise LayoutError(
             f"{path}: not a handskin layout v{FORMAT_VERSION} (format_version={version}, "
             f"keys {sorted(fields)}). Fix: save it with TaxelLayout.save"
         )
+    if len(fields["positions_m"]) > MAX_TAXELS:
+        too_many(path, f"{len(fields['positions_m']):,} taxels")
     n_ch = int(fields.pop("n_channels", -1))
     name = str(fields.pop("name", ""))
     return {"n_channels": None if n_ch < 0 else n_ch, "name": name, **fields}
@@ -211,8 +228,8 @@ def _csv_units(path: Path, line: int, header: list[str], units: str | None) -> f
     pos = [c for c in header if re.fullmatch(r"[xyz](_.*)?", c)]
     suffixes = {c.partition("_")[2] for c in pos}
     fix = (
-        "Fix: name the columns x_m,y_m,z_m or x_mm,y_mm,z_mm, or for plain x,y,z pass "
-        "units='m' or units='mm' to TaxelLayout.load (--units m or mm to handskin map)"
+        "Fix: name the columns x_m,y_m,z_m or x_mm,y_mm,z_mm, or give the unit of plain x,y,z "
+        "(--units m or mm; in Python units='m' or 'mm')"
     )
     unknown = [c for c in header if c not in pos and c not in CSV_OPTIONAL]
     if unknown or sorted(c[0] for c in pos) != ["x", "y", "z"] or len(suffixes) != 1:
@@ -229,8 +246,8 @@ def _csv_units(path: Path, line: int, header: list[str], units: str | None) -> f
         )
     if units is not None and units != unit:
         raise LayoutError(
-            f"{path}, line {line}: columns say {unit!r} but units={units!r}. "
-            "Fix: drop the units argument"
+            f"{path}, line {line}: columns say {unit!r} but --units says {units!r}. "
+            "Fix: leave --units out"
         )
     return UNIT_SCALE[unit]
 
@@ -279,9 +296,9 @@ def read_xyz(path: Path, lines: Lines, units: str | None) -> Fields:
     """Plain text: one taxel per line, ``x y z`` or ``x y z nx ny nz`` ('#' comments, commas ok)."""
     if units is None:
         raise LayoutError(
-            f"{path}: plain xyz text has no unit and no iCub header. Fix: pass "
-            "units='m' or units='mm' to TaxelLayout.load (--units m or mm to handskin map), "
-            "or add the iCub '[calibration]' header"
+            f"{path}: plain xyz text has no unit and no iCub header. Fix: give the unit "
+            "(--units m or mm; in Python units='m' or 'mm'), or add the iCub '[calibration]' "
+            "header"
         )
     rows = [(n, t.replace(",", " ").split()) for n, t in lines if t.strip() and t.strip()[0] != "#"]
     width = 6 if rows and len(rows[0][1]) == 6 else 3

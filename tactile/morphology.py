@@ -1,15 +1,16 @@
 """Fast grey erosion and dilation with disk footprints, on single images or batches.
 
-A disk is a union of centred rectangles (one per distinct row half-width), a grey erosion by a
-union is the minimum of the erosions by its parts, and an erosion by a rectangle is separable
-into two 1-D minimum filters. The result equals ``skimage.morphology.erosion`` / ``dilation``
-with ``skimage.morphology.disk(radius)`` exactly, borders included: skimage's default
-``mode="reflect"`` is scipy.ndimage's ``"reflect"`` (d c b a | a b c d), which is separable.
+A disk is the union of its rows: row ``dy`` spans the columns ``|dx| <= w(dy)``. The minimum over
+the disk is therefore the minimum over ``dy`` of the image's horizontal running minima of half
+width ``w(dy)``, shifted by ``dy`` rows; the running minima of half widths 1, 2, ..., r are
+built one from the other. That is 4 r array operations for a disk of radius r. The result
+equals ``skimage.morphology.erosion`` / ``dilation`` with ``skimage.morphology.disk(radius)``
+exactly, borders included: skimage's default ``mode="reflect"`` is scipy.ndimage's
+``"reflect"`` (d c b a | a b c d), numpy's ``"symmetric"`` padding.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from functools import lru_cache
 
 import numpy as np
@@ -17,24 +18,13 @@ from skimage.morphology import disk
 
 from tactile.errors import MapError
 
-Filter1d = Callable[..., np.ndarray]
-
 
 @lru_cache(maxsize=32)
-def disk_rectangles(radius: int) -> tuple[tuple[int, int], ...]:
-    """Centred rectangles whose union is ``skimage.morphology.disk(radius)``.
-
-    Returns
-    -------
-    rects : tuple of (half_height, half_width) in pixels — rectangle rows |dy| <= half_height,
-        columns |dx| <= half_width; one per distinct row half-width, widest first.
-    """
+def disk_half_widths(radius: int) -> tuple[int, ...]:
+    """Half width of every row of ``skimage.morphology.disk(radius)``, rows dy = -r..r, pixels:
+    row dy holds the columns |dx| <= w(dy)."""
     fp = disk(radius).astype(bool)
-    half_widths = fp.sum(axis=1)[radius:] // 2  # rows dy = 0..radius, centred odd runs
-    rects = []
-    for w in np.unique(half_widths)[::-1]:
-        rects.append((int(np.flatnonzero(half_widths == w).max()), int(w)))
-    return tuple(rects)
+    return tuple(int(row.sum()) // 2 for row in fp)
 
 
 def _check(images: np.ndarray, radius: int) -> None:
@@ -44,40 +34,22 @@ def _check(images: np.ndarray, radius: int) -> None:
         raise MapError(f"disk radius must be a non-negative integer of pixels, got {radius!r}")
 
 
-def _window(x: np.ndarray, n: int, axis: int, combine: np.ufunc) -> np.ndarray:
-    """Min (max) over every run of ``n`` along ``axis``: length L -> L - n + 1 (sparse table)."""
-    length = x.shape[axis]
-    acc, span = x, 1  # acc[i] = min(x[i : i + span]), length - span + 1 entries
-    while 2 * span <= n:
-        m = length - 2 * span + 1
-        acc = combine(_take(acc, 0, m, axis), _take(acc, span, span + m, axis))
-        span *= 2
-    if span == n:
-        return acc
-    m = length - n + 1
-    return combine(_take(acc, 0, m, axis), _take(acc, n - span, n - span + m, axis))
-
-
-def _take(x: np.ndarray, start: int, stop: int | None, axis: int) -> np.ndarray:
-    index = [slice(None)] * x.ndim
-    index[axis] = slice(start, stop)
-    return x[tuple(index)]
-
-
 def _disk_filter(images: np.ndarray, radius: int, combine: np.ufunc) -> np.ndarray:
-    """Min (or max) of ``images`` over a disk, via its rectangles and separable 1-D windows."""
+    """Min (or max) of ``images`` over a disk: row-shifted horizontal running minima (maxima)."""
     _check(images, radius)
     if radius == 0:
         return images.copy()
     r, (h, w) = int(radius), images.shape[-2:]
     pad = [(0, 0)] * (images.ndim - 2) + [(r, r), (r, r)]
     padded = np.pad(images, pad, mode="symmetric")  # = scipy.ndimage / skimage "reflect"
+    running = [padded[..., r : r + w]]  # running[k]: half width k, all padded rows
+    for k in range(1, r + 1):
+        step = combine(padded[..., r - k : r - k + w], padded[..., r + k : r + k + w])
+        running.append(combine(running[-1], step, out=step))
     out = None
-    for half_h, half_w in disk_rectangles(r):
-        rows = padded[..., r - half_h : r + half_h + h, :]
-        rect = _window(rows, 2 * half_w + 1, -1, combine)[..., r - half_w : r - half_w + w]
-        rect = _window(rect, 2 * half_h + 1, -2, combine)
-        out = np.array(rect) if out is None else combine(out, rect, out=out)
+    for dy, half in enumerate(disk_half_widths(r)):
+        rows = running[half][..., dy : dy + h, :]
+        out = np.array(rows) if out is None else combine(out, rows, out=out)
     return out
 
 

@@ -13,6 +13,8 @@ from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
+from tactile.files import save_figure
+
 if TYPE_CHECKING:
     from tactile.tactile_map import TactileMap
 
@@ -70,8 +72,4 @@ def map_figure(tmap: TactileMap, title: str = "") -> Figure:
 
 def save_map_picture(tmap: TactileMap, path: str | Path, title: str = "") -> Path:
     """Write :func:`map_figure` to ``path`` (PNG) and return the path."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig = map_figure(tmap, title)
-    fig.savefig(path, dpi=110)
-    return path
+    return save_figure(map_figure(tmap, title), path, dpi=110)

@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from tactile.errors import MapError
+from tactile.files import save_figure
 from tactile.labels import CLASS_NAMES, PALETTE, colorize
 
 
@@ -37,11 +38,15 @@ def overlay(image: np.ndarray, labels: np.ndarray) -> np.ndarray:
     return np.where(labels[..., None] > 0, coloured, grey).astype(np.uint8)
 
 
+INSTANCE_COLOURS = ("white", "cyan", "yellow", "magenta")  # outline of contact 1, 2, ...
+
+
 def contact_sheet(
     images: np.ndarray,
     labels: np.ndarray | None = None,
     titles: Sequence[str] | None = None,
     *,
+    instances: np.ndarray | None = None,
     n_cols: int = 6,
     title: str = "",
     tile_in: float = 2.2,
@@ -49,7 +54,9 @@ def contact_sheet(
     """A grid of samples; with ``labels``, each tile shows the label colours over the image.
 
     images : (B, H, W) uint8 tactile images. labels : (B, H, W) int classes (0..6) or None.
-    titles : one short caption per tile. The legend names the classes with the paper's palette.
+    titles : one short caption per tile. instances : (B, H, W) int contact per pixel (0 none,
+    k + 1 contact k) or None; each contact is outlined in its colour (`INSTANCE_COLOURS`). The
+    legend names the classes with the paper's palette.
     """
     images = np.asarray(images)
     _check(images, labels, titles)
@@ -64,6 +71,8 @@ def contact_sheet(
             continue
         tile = images[k] if labels is None else overlay(images[k], np.asarray(labels[k]))
         ax.imshow(tile, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        if instances is not None:
+            _outline(ax, np.asarray(instances[k]))
         if titles is not None:
             ax.set_title(titles[k], fontsize=7)
     if labels is not None:
@@ -74,9 +83,14 @@ def contact_sheet(
     return fig
 
 
+def _outline(ax, contacts: np.ndarray) -> None:
+    """Outline every contact (pixels k + 1 of ``contacts`` (H, W)) in its colour."""
+    for k in range(1, int(contacts.max(initial=0)) + 1):
+        if (contacts == k).any():
+            colour = INSTANCE_COLOURS[(k - 1) % len(INSTANCE_COLOURS)]
+            ax.contour(contacts == k, levels=[0.5], colors=[colour], linewidths=0.8)
+
+
 def save_contact_sheet(path: str | Path, images: np.ndarray, **kw: object) -> Path:
     """Write :func:`contact_sheet` to ``path`` (PNG); keyword arguments go to it."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    contact_sheet(images, **kw).savefig(path, dpi=100)  # type: ignore[arg-type]
-    return path
+    return save_figure(contact_sheet(images, **kw), path, dpi=100)  # type: ignore[arg-type]

@@ -181,6 +181,46 @@ class TactileMap:
         values = lut @ np.ascontiguousarray(p.T, dtype=lut.dtype)  # (H * W, B)
         return values.T.reshape(len(p), *self.shape)
 
+    @cached_property
+    def _taxel_boxes(self) -> np.ndarray:
+        """(N, 4) int64: per taxel, the first row, last row, first column and last column of
+        the pixels its pressure reaches (its column of the look-up table); empty: (H, -1, W, -1)."""
+        lut = self.lut.tocoo()
+        (height, width), n = self.shape, self.n_taxels
+        rows, cols = np.divmod(lut.row.astype(np.int64), width)
+        boxes = np.tile(np.array([height, -1, width, -1], dtype=np.int64), (n, 1))
+        np.minimum.at(boxes[:, 0], lut.col, rows)
+        np.maximum.at(boxes[:, 1], lut.col, rows)
+        np.minimum.at(boxes[:, 2], lut.col, cols)
+        np.maximum.at(boxes[:, 3], lut.col, cols)
+        return boxes
+
+    def support_box(self, taxels: np.ndarray, margin_px: int = 0) -> tuple[slice, slice] | None:
+        """Row and column slices of the pixels that taxels ``taxels`` (N,) bool reach, grown by
+        ``margin_px`` and clipped to the grid; None when they reach no pixel."""
+        boxes = self._taxel_boxes[np.asarray(taxels, bool)]
+        if not len(boxes) or boxes[:, 1].max() < 0:
+            return None
+        top, left = boxes[:, 0].min(), boxes[:, 2].min()
+        bottom, right = boxes[:, 1].max(), boxes[:, 3].max()
+        height, width = self.shape
+        return (
+            slice(max(top - margin_px, 0), min(bottom + margin_px + 1, height)),
+            slice(max(left - margin_px, 0), min(right + margin_px + 1, width)),
+        )
+
+    def interpolate_box(self, p: np.ndarray, rows: slice, cols: slice) -> np.ndarray:
+        """``self.interpolate(p)[..., rows, cols]``, computed on those pixels only (the same
+        rows of the look-up table, so the same floats): (h, w) or (B, h, w) float64."""
+        height, width = self.shape
+        r, c = range(*rows.indices(height)), range(*cols.indices(width))
+        flat = (np.arange(r.start, r.stop)[:, None] * width + np.arange(c.start, c.stop)).ravel()
+        lut = self.lut[flat]
+        if p.ndim == 1:
+            return (lut @ p.astype(np.float64, copy=False)).reshape(len(r), len(c))
+        values = lut @ np.ascontiguousarray(p.T, dtype=np.float64)
+        return values.T.reshape(len(p), len(r), len(c))
+
     def image(self, p: np.ndarray, *, erode_px: int = 2, dilate_px: int = 4) -> np.ndarray:
         """The paper's tactile image: grey levels, erosion then dilation with disk footprints.
 
@@ -192,11 +232,31 @@ class TactileMap:
             an all-zero (or non-positive) frame gives an all-zero image.
         """
         p = self._check_pressures(p)
+        if p.ndim == 1:
+            return self._image_one(p, erode_px, dilate_px)
         grey = raster.grey_levels(self.interpolate(p), p.max(axis=-1))
         grey = np.ascontiguousarray(grey)
         if grey.ndim == 2 or len(grey) == 0:
             return erode_dilate(grey, erode_px, dilate_px)
         return np.stack([erode_dilate(g, erode_px, dilate_px) for g in grey])
+
+    def _image_one(self, p: np.ndarray, erode_px: int, dilate_px: int) -> np.ndarray:
+        """One frame's image, made on the box of the pixels its pressed taxels reach, grown by
+        both radii and one pixel: outside the box the image is 0, and inside it the padding the
+        morphology reflects at an inner edge is 0 as on the whole grid, so the box holds the
+        whole-grid result (tests/tactile/test_tactile_map.py compares the two)."""
+        for radius in (erode_px, dilate_px):
+            if int(radius) != radius or radius < 0:
+                raise MapError(
+                    f"disk radius must be a non-negative integer of pixels, got {radius!r}"
+                )
+        out = np.zeros(self.shape, dtype=np.uint8)
+        box = self.support_box(p > 0, int(erode_px) + int(dilate_px) + 1)
+        if box is None:
+            return out
+        grey = raster.grey_levels(self.interpolate_box(p, *box), p.max())
+        out[box] = erode_dilate(np.ascontiguousarray(grey), erode_px, dilate_px)
+        return out
 
     def label_image(
         self, p: np.ndarray, labels: np.ndarray, *, erode_px: int = 2, dilate_px: int = 4

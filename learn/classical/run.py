@@ -27,6 +27,7 @@ from learn.classical.vgg_svm import VggSvmClassifier
 from learn.config import BovwConfig, VggSvmConfig
 from learn.data.folder import HAND_NAMES
 from learn.data.load import materialize, open_split
+from learn.evaluate.contacts import contact_scores, split_contacts
 from learn.infer.fastpath import check_timing
 from learn.train.checkpoint import versions
 from learn.train.runs import ensure_model
@@ -247,7 +248,7 @@ def evaluate_classical(
     cm = confusion(y, pred, len(names))
     found = scores(cm)
     ms = ms_per_image(model, x, threads, time_runs, time_rounds)
-    return {
+    row = {
         "checkpoint": str(path),
         "arch": meta["kind"],
         "task": "classify",
@@ -270,3 +271,8 @@ def evaluate_classical(
         "train_data": meta.get("data"),
         "test_data": str(data),
     }
+    contacts = split_contacts(Path(data), "classify", meta["input_size"])
+    if contacts is not None:  # by number of contacts (learn.evaluate.contacts)
+        pred, y = torch.as_tensor(np.asarray(pred, np.int64)), torch.from_numpy(y)
+        row |= contact_scores(pred, y, contacts, "classify", len(names))
+    return row

@@ -22,6 +22,8 @@ from tqdm.auto import tqdm
 
 from learn.data.dataset import TorchTactileDataset
 from learn.data.folder import HAND_NAMES, FolderDataset
+from learn.data.sequences import SequenceDataset
+from learn.inputs import mirror_classes
 from tactile.dataset.reader import DATASET, DatasetReader
 from tactile.dataset.splits import split_indices
 from tactile.errors import ConfigError, DataError
@@ -30,10 +32,13 @@ from tactile.labels import CLASS_NAMES
 
 @dataclass
 class TensorData:
-    """Images ``x`` (S, 1, h, w) float32 in [0, 1] and targets ``y`` (S,) or (S, h, w) int64."""
+    """Images ``x`` (S, 1, h, w) (or sequences (S, T, 1, h, w)) float32 in [0, 1] and targets
+    ``y`` (S,) or (S, h, w) int64; ``mirror`` (C,) int64, the class each class becomes in a
+    mirrored view (`learn.inputs.mirror_classes`), or None."""
 
     x: torch.Tensor
     y: torch.Tensor
+    mirror: torch.Tensor | None = None
 
 
 @dataclass
@@ -48,12 +53,15 @@ class Data:
 
 
 def materialize(ds: Dataset, desc: str = "reading", progress: bool = True) -> TensorData:
-    """Every item of an un-flipped dataset stacked into memory (a progress bar from 500 items)."""
+    """Every item of an un-flipped dataset stacked into memory (a progress bar from 500 items),
+    with the mirror pairs of its ``class_names``, if any (`learn.inputs.mirror_classes`)."""
     bar = tqdm(range(len(ds)), desc=desc, leave=False, disable=not progress or len(ds) < 500)
     items = [ds[j] for j in bar]
     if not items:
         raise DataError("a data split is empty. Fix: a larger dataset or a smaller val_fraction")
-    return TensorData(torch.stack([x for x, _ in items]), torch.stack([y for _, y in items]))
+    mirror = mirror_classes(getattr(ds, "class_names", ()))
+    x, y = torch.stack([x for x, _ in items]), torch.stack([y for _, y in items])
+    return TensorData(x, y, None if mirror is None else torch.from_numpy(mirror))
 
 
 def open_split(
@@ -66,7 +74,10 @@ def open_split(
     canvas_mm: tuple[float, float] | None = None,
 ) -> Dataset:
     """An un-flipped torch dataset of ``split`` from a handskin dataset or an image folder;
-    ``canvas_mm`` (``ModelConfig.canvas_mm``) needs a dataset, whose map grid is in mm."""
+    ``canvas_mm`` (``ModelConfig.canvas_mm``) needs a dataset, whose map grid is in mm. Task
+    "action": the dataset's press sequences (`SequenceDataset`)."""
+    if task == "action":
+        return SequenceDataset(path, split, size, canvas_mm)
     if is_dataset(path):
         return TorchTactileDataset(
             path, split=split, task=task, size=size, flips=False, canvas_mm=canvas_mm
@@ -192,4 +203,4 @@ def _len(ds: Dataset | None) -> int:
 def _class_names(ds: Dataset, task: str) -> tuple[str, ...]:
     if task == "segment":
         return CLASS_NAMES
-    return ds.class_names if isinstance(ds, FolderDataset) else HAND_NAMES
+    return ds.class_names if isinstance(ds, FolderDataset | SequenceDataset) else HAND_NAMES

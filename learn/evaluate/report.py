@@ -1,5 +1,7 @@
-"""The markdown report of ``handskin evaluate``: our rows beside the paper's Tables 3 and 8, then
-each model's details (training data and start, timing, scores, confusion matrix).
+"""The markdown report of ``handskin evaluate``: our rows beside the paper's Tables 3 and 8, the
+scores by number of contacts where the data has several (`learn.evaluate.contacts`), the action
+networks' section (`learn.evaluate.action_report`), then each model's details (training data and
+start, timing, scores, confusion matrix).
 
     rows = [evaluate_checkpoint("runs/handsnet/best.pt", "out/forearm")]
     write_report(rows, "report.md", header="Data: out/forearm")
@@ -16,7 +18,10 @@ import torch
 
 from learn import metrics as M
 from learn.evaluate import paper
+from learn.evaluate.action_report import action_section
+from learn.evaluate.contacts import contacts_section
 from learn.evaluate.scoring import SEG_KEYS
+from tactile.files import write_text_atomic
 
 ARCH_LABEL = {
     "handsnet": "HandsNet",
@@ -26,6 +31,8 @@ ARCH_LABEL = {
     "vgg_svm": "VGG16 + SVM",
     "bovw": "BoVW",
     "ensemble": "Ensemble",
+    "action_tcn": "frame CNN + temporal conv",
+    "action_3d": "3D CNN",
 }
 #: The paper's Table 3 (hand / non-hand, % accuracy; ms per image). None: not known to us.
 PAPER_TABLE3 = {
@@ -224,25 +231,26 @@ def _details(r: dict, label: str) -> list[str]:
 def write_report(rows: list[dict], path: str | Path, header: str = "") -> Path:
     """The markdown report at ``path`` and its rows as ``.json`` beside it."""
     labels = row_labels(rows)
-    lines = [
-        "# handskin evaluation",
-        "",
-        header,
-        "",
-        "Columns marked *paper* are Albini & Cannata (IJRR 2020), measured on the paper's own "
-        "recordings; *unknown* marks a value we do not have. Ours are on the test split named "
-        "above. Times: each inference path's median of its timed runs, the least over rounds in "
-        "which a network's paths take turns.",
-        "",
-        *_table(rows, labels, "classify"),
-        *_table(rows, labels, "segment"),
-        *_hand_pixels(rows, labels),
-        "## Details",
-        "",
-    ]
-    for r, label in zip(rows, labels, strict=True):
-        lines += _details(r, label)
     path = Path(path)
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    path.with_suffix(".json").write_text(json.dumps(rows, indent=1))
+    images = [(r, label) for r, label in zip(rows, labels, strict=True) if r["task"] != "action"]
+    lines = ["# handskin evaluation", "", header, ""]
+    if images:
+        lines += [
+            "Columns marked *paper* are Albini & Cannata (IJRR 2020), measured on the paper's own "
+            "recordings; *unknown* marks a value we do not have. Ours are on the test split named "
+            "above. Times: each inference path's median of its timed runs, the least over rounds "
+            "in which a network's paths take turns.",
+            "",
+            *_table(rows, labels, "classify"),
+            *_table(rows, labels, "segment"),
+            *_hand_pixels(rows, labels),
+            *contacts_section(rows, labels),
+        ]
+    lines += action_section(rows, labels, path)
+    if images:
+        lines += ["## Details", ""]
+    for r, label in images:
+        lines += _details(r, label)
+    write_text_atomic(path, "\n".join(lines) + "\n")
+    write_text_atomic(path.with_suffix(".json"), json.dumps(rows, indent=1))
     return path

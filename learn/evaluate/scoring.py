@@ -15,6 +15,8 @@ from torch import nn
 
 from learn.config import RunConfig
 from learn.data.load import TensorData, is_dataset, materialize, open_split
+from learn.evaluate.actions import evaluate_action
+from learn.evaluate.contacts import contact_scores, split_contacts
 from learn.infer.ensemble import FlipTTA, MeanSoftmax, Member, load_members, tta_views
 from learn.infer.fastpath import check_timing, fast_inference, gpu_ms_per_image, interleaved_cpu_ms
 from learn.infer.int8_file import int8_with_note
@@ -52,6 +54,11 @@ def eval_jobs(
     jobs = []
     for c, ckpt in ckpts.items():
         run = run_of(ckpt, c)
+        if run.task == "action" and (tta or ensemble):
+            raise ConfigError(
+                f"{c} is an action network; --tta and --ensemble are for the image networks. "
+                "Fix: evaluate it without them (or in a command of its own)"
+            )
         if tta:  # a network trained without flips fails here, before any work
             tta_views(run, c)
         by_task.setdefault(run.task, []).append(c)
@@ -100,11 +107,16 @@ def evaluate_job(
     several paths: the mean softmax of those networks; ``job.int8`` (HandsNet): its int8 copy,
     calibrated on training images of ``data_path`` (an int8 file runs as its saved network).
     Timing: each inference path's median of ``time_runs`` runs, the least over ``time_rounds``
-    rounds in which the paths take turns (`learn.infer.fastpath.interleaved_cpu_ms`)."""
+    rounds in which the paths take turns (`learn.infer.fastpath.interleaved_cpu_ms`). On a
+    dataset of several contacts per sample, eval mode's scores by number of contacts too
+    (`learn.evaluate.contacts`)."""
     check_timing(time_runs, time_rounds, threads)
     if len(job.paths) == 1:
         ckpt = load_checkpoint(job.paths[0])
         model, run = model_from_checkpoint(ckpt, int8_ok=True, where=job.paths[0])
+        if run.task == "action":  # sequences in, its own row (learn.evaluate.actions)
+            timing = {"threads": threads, "time_runs": time_runs, "time_rounds": time_rounds}
+            return evaluate_action(job.paths[0], ckpt, model, run, Path(data_path), **timing)
         members = [Member(job.paths[0], ckpt, model, run)]
     else:
         members = load_members(job.paths)
@@ -120,17 +132,19 @@ def evaluate_job(
     hand = hand_classes or (first.ckpt.get("data") or {}).get("hand_classes")
     test = read_test_split(Path(data_path), run, hand)
     n_cls, size = run.model.num_classes, run.model.input_size
+    contacts = split_contacts(Path(data_path), run.task, size, run.model.canvas_mm)
+    keep = contacts is not None  # eval mode's predictions, scored by number of contacts
     int8 = job.int8 or is_int8(first.ckpt)
     int8_note = None
     if int8:  # one path: the int8 network is its own fast path
         q8, int8_note = int8_with_note(first.model, run, first.ckpt, Path(data_path), hand)
-        ref = res = evaluate_tensors(q8, test, n_cls)
+        ref = res = evaluate_tensors(q8, test, n_cls, keep_predictions=keep)
         fast = q8
         (t,) = interleaved_cpu_ms([q8], size, threads, time_runs, time_rounds)
         ms = {"eval_mode": t, "prepared": t, "fast": t, "gpu": None}
     else:
         model = build(lambda m: m)
-        ref = evaluate_tensors(model, test, n_cls)
+        ref = evaluate_tensors(model, test, n_cls, keep_predictions=keep)
         fast, res = scored_fast_path(
             lambda **kw: build(lambda m: fast_inference(m, **kw)),
             test,
@@ -169,6 +183,8 @@ def evaluate_job(
     }
     if len(members) > 1:
         row["members"] = [member_record(m) for m in members]
+    if contacts is not None:
+        row |= contact_scores(ref.predictions, test.y, contacts, run.task, n_cls)
     return row
 
 

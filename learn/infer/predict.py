@@ -33,8 +33,8 @@ from learn.inputs import input_canvas, labels_on_map, net_input
 from learn.numerics import flushing
 from learn.train.checkpoint import is_int8, load_checkpoint, model_from_checkpoint
 from tactile.dataset.reader import DatasetReader
-from tactile.errors import DataError
-from tactile.labels import PartSummary, backproject, part_summary
+from tactile.errors import ConfigError, DataError
+from tactile.labels import PartSummary, backproject, contact_instances, part_summary
 from tactile.layout import TaxelLayout
 from tactile.tactile_map import TactileMap
 
@@ -84,6 +84,12 @@ def load_predictor(
         members = [(m.path, m.ckpt, m.model, m.run) for m in load_members(path, int8_ok=True)]
     nets = []
     for where, ckpt, model, run in members:
+        if run.task == "action":
+            raise ConfigError(
+                f"{where} is an action network: it names the action of a whole press from its "
+                "sequence of frames, not the class of one image. Fix: give a classifier or "
+                "segmenter here; score the action network with handskin evaluate"
+            )
         fast = (
             int8_from_checkpoint(model, run, ckpt, calibration)
             if int8 or is_int8(ckpt)
@@ -110,6 +116,8 @@ class Prediction:
     true_segmentation: np.ndarray | None = None  # (H, W) uint8 ground truth (dataset sample)
     true_labels: np.ndarray | None = None  # (N,) uint8 ground-truth taxel classes (dataset)
     threshold_pa: float = 0.0  # a taxel counts as pressed in ``parts`` above this pressure, Pa
+    contacts: np.ndarray | None = None  # (N,) int64 contact of each pressed taxel, 0 none, 1..K
+    contact_parts: list[dict[str, PartSummary]] | None = None  # per contact, like ``parts``
 
 
 def classify(pred: Prediction, clf: Predictor, step_mm: float = 1.0) -> None:
@@ -168,12 +176,21 @@ def predict_frame(
 def attach_taxels(
     pred: Prediction, tmap: TactileMap, p: np.ndarray, threshold_pa: float = 0.0
 ) -> Prediction:
-    """Fill ``pressure`` (N,) Pa and, with a segmentation, ``taxel_labels`` (back-projected) and
-    ``parts`` (taxels with p > ``threshold_pa`` per predicted part). Returns ``pred``."""
+    """Fill ``pressure`` (N,) Pa, ``contacts`` (the pressed taxels grouped into separate
+    contacts, `tactile.labels.contact_instances`) and, with a segmentation, ``taxel_labels``
+    (back-projected) and ``parts`` (taxels with p > ``threshold_pa`` per predicted part), also
+    per contact (``contact_parts``). Returns ``pred``."""
     pred.pressure, pred.threshold_pa = np.asarray(p, np.float64), float(threshold_pa)
+    pred.contacts = contact_instances(tmap.positions_m, pred.pressure, threshold=threshold_pa)
     if pred.segmentation is not None:
         pred.taxel_labels = backproject(tmap, pred.segmentation)
         pred.parts = part_summary(pred.taxel_labels, pred.pressure, threshold=threshold_pa)
+        pred.contact_parts = [
+            part_summary(
+                pred.taxel_labels * (pred.contacts == k), pred.pressure, threshold=threshold_pa
+            )
+            for k in range(1, int(pred.contacts.max(initial=0)) + 1)
+        ]
     return pred
 
 

@@ -2,7 +2,8 @@
 
 Every model takes ``(B, in_channels, H, W)`` float images in [0, 1] and returns logits:
 classifiers ``(B, num_classes)``, segmenters ``(B, num_classes, H, W)`` at the input size.
-Each exposes ``num_classes``, ``in_channels`` and ``task`` ("classification" / "segmentation").
+Each exposes ``num_classes``, ``in_channels`` and ``task`` ("classification" / "segmentation");
+the action networks (``task = "sequence"``) take sequences ``(B, T, in_channels, H, W)``.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import torch
 from torch import nn
 
 import learn.numerics  # noqa: F401 (torch's worker threads start flushing subnormals)
+from learn.models.action import Action3D, ActionTCN
 from learn.models.blocks import fold_batch_norm
 from learn.models.fcn import FCN16s
 from learn.models.handsnet import HandsNet
@@ -26,6 +28,8 @@ MODELS: dict[str, Callable[..., nn.Module]] = {
     "vgg16": VGGClassifier,
     "segnet": SegNet,
     "fcn16s": FCN16s,
+    "action_tcn": ActionTCN,
+    "action_3d": Action3D,
 }
 
 
@@ -58,6 +62,8 @@ def prepare_for_inference(model: nn.Module) -> nn.Module:
 
 __all__ = [
     "MODELS",
+    "Action3D",
+    "ActionTCN",
     "FCN16s",
     "HandsNet",
     "SegNet",

@@ -182,8 +182,10 @@ def load_checkpoint(path: str | Path) -> dict[str, object]:
             warnings.filterwarnings("ignore", ".*(TypedStorage|quantized tensor creation)")
             ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as err:  # unpickling errors come in many types
+        why = str(err).splitlines()[0] if str(err) else ""
+        why = "not a PyTorch file" if "Weights only load failed" in why or not why else why
         raise DataError(
-            f"{path} is not a readable checkpoint ({type(err).__name__}: {err}). Fix: give a .pt "
+            f"{path} is not a readable checkpoint ({type(err).__name__}: {why}). Fix: give a .pt "
             "file written by handskin train (a copy cut short or from another program fails so)"
         ) from err
     missing = [k for k in REQUIRED_KEYS if not isinstance(ckpt, Mapping) or k not in ckpt]

@@ -125,7 +125,7 @@ def cross_validate(
 
 def _fold_score(run: RunConfig, full: TensorData, train: np.ndarray, val: np.ndarray) -> float:
     """Best validation metric of one fold's training."""
-    pick = lambda idx: TensorData(full.x[idx], full.y[idx])  # noqa: E731
+    pick = lambda idx: TensorData(full.x[idx], full.y[idx], full.mirror)  # noqa: E731
     data = Data(pick(train), pick(val), None, (), {"kind": "cv fold"})
     return fit(run, data, None, progress=False).best_metric
 

@@ -8,6 +8,8 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
+from tactile.files import save_figure
+
 
 def history_figure(
     history: list[dict],
@@ -50,6 +52,5 @@ def plot_history(
     metric: str = "validation metric",
     best_epoch: int | None = None,
 ) -> Path:
-    """:func:`history_figure` saved as a PNG at ``path``."""
-    history_figure(history, title, metric, best_epoch).savefig(path, dpi=100)
-    return Path(path)
+    """:func:`history_figure` saved as a PNG at ``path`` (atomically)."""
+    return save_figure(history_figure(history, title, metric, best_epoch), path, dpi=100)

@@ -4,11 +4,12 @@
     data = load_data("out/forearm", run)          # train / val (subject-disjoint) / test
     result = fit(run, data, "runs/handsnet")      # last.pt, best.pt, curves.png, run.toml
 
-The training images live in memory as ``(S, 1, h, w)`` float32 tensors. Every epoch draws a
-seeded permutation of the ``V S`` (sample, view) pairs — the paper's threefold augmentation:
-original, columns reversed, rows reversed (``run.flips``) — and ``get_batch`` gathers and
-flips them. Epoch ``e`` reseeds torch from ``(seed, e)``, so a resumed run equals an
-uninterrupted one on the CPU, to the bit.
+The training images live in memory as ``(S, 1, h, w)`` float32 tensors (sequences as
+``(S, T, 1, h, w)``). Every epoch draws a seeded permutation of the ``V S`` (sample, view) pairs
+— the paper's threefold augmentation: original, columns reversed, rows reversed
+(``run.flips``) — and ``get_batch`` gathers and flips them, swapping mirror classes (a push to
+the left seen mirrored is a push to the right: ``TensorData.mirror``). Epoch ``e`` reseeds
+torch from ``(seed, e)``, so a resumed run equals an uninterrupted one on the CPU, to the bit.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from tqdm.auto import tqdm
 
 from learn.config import RunConfig, metric_name
 from learn.data.load import Data, TensorData
-from learn.inputs import PAPER_VIEWS, flip_view
+from learn.inputs import PAPER_VIEWS, flip_view, targets_in_view
 from learn.models import create_model
 from learn.numerics import flushing
 from learn.train.checkpoint import BEST, LAST, load_checkpoint
@@ -34,6 +35,7 @@ from learn.train.optim import load_weights, make_optimizer, make_scheduler
 from learn.train.state import check_stop_epoch, improved, patience_out, restore, save, weights_copy
 from learn.train.validation import evaluate_tensors
 from tactile.config import to_toml
+from tactile.files import write_text_atomic
 
 
 @dataclass
@@ -58,15 +60,15 @@ def views_of(run: RunConfig) -> torch.Tensor:
 
 
 def get_batch(data: TensorData, items: torch.Tensor, views: torch.Tensor):
-    """Images (B, 1, h, w) and targets (B,) or (B, h, w) of items ``sample * V + k``: sample
-    ``sample`` in view ``views[k]``."""
+    """Images (B, 1, h, w) or sequences (B, T, 1, h, w) and targets (B,) or (B, h, w) of items
+    ``sample * V + k``: sample ``sample`` in view ``views[k]`` (a mirrored view swaps the mirror
+    classes of ``data.mirror``: a clockwise twist becomes a counter-clockwise one)."""
     sample, view = items // len(views), views[items % len(views)]
     x, y = data.x[sample].clone(), data.y[sample].clone()
     for v in view.unique().tolist():
         sel = view == v
         x[sel] = flip_view(x[sel], v)
-        if y.ndim == 3:
-            y[sel] = flip_view(y[sel], v)
+        y[sel] = targets_in_view(y[sel], v, data.mirror)
     return x, y
 
 
@@ -161,7 +163,7 @@ def fit(
     check_stop_epoch(stop_after_epoch, start, run.train.epochs, None if out is None else out / LAST)
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        (out / "run.toml").write_text(to_toml(run))
+        write_text_atomic(out / "run.toml", to_toml(run))
     paused = False
     for epoch in range(start, run.train.epochs):
         tic = time.perf_counter()

@@ -150,11 +150,11 @@ def save(
     save_checkpoint(ckpt, out / name)
 
 
-def check_run_folder(out: Path, resume: bool, data: Path) -> str | None:
+def check_run_folder(out: Path, resume: bool, data: Path) -> None:
     """Refuse, before any work, a training run that would write over what ``out`` holds:
     a fresh start over a run (last.pt), best weights without the state to resume them (best.pt
-    alone: neither a fresh start nor --resume may replace them), or --resume on other data than
-    the run's. Returns a note to print when --resume finds nothing to resume."""
+    alone: neither a fresh start nor --resume may replace them), --resume with nothing to
+    resume, or --resume on other data than the run's."""
     last, best = out / LAST, out / BEST
     if best.is_file() and not last.is_file():
         raise ConfigError(
@@ -163,7 +163,12 @@ def check_run_folder(out: Path, resume: bool, data: Path) -> str | None:
             f"{out.parent / (out.name + '_best.pt')}), or give another --out"
         )
     if not last.is_file():
-        return f"--resume: {out} holds no {LAST}, so a new run starts there" if resume else None
+        if resume:
+            raise ConfigError(
+                f"--resume: {out} holds no {LAST}, so there is no run to resume. Fix: leave "
+                "--resume out to start a new run there, or give the --out of the run to resume"
+            )
+        return
     held = load_checkpoint(last)
     if not resume:
         raise ConfigError(
@@ -177,4 +182,3 @@ def check_run_folder(out: Path, resume: bool, data: Path) -> str | None:
             f"--resume: the run in {out} trains on {theirs}, not {data}. Fix: resume it on "
             f"{theirs}, or start a run on {data} in another --out"
         )
-    return None

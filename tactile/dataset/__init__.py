@@ -6,6 +6,7 @@ ingest of real recordings and PNG export. Format: ``docs/dataset_format.md``.
     writer.write_chunk(0, samples); writer.merge()          # synthetic (sim/generate.py)
     ingest_recording("layout.txt", "frames.csv", out)        # real recording
     ds = open_dataset(out); ds[0]["image"], ds.splits["train"], ds.map
+    verify_dataset(out).faults                               # every damage named, with its fix
 """
 
 from tactile.dataset.export import export_png
@@ -16,6 +17,7 @@ from tactile.dataset.merge import merge_chunks
 from tactile.dataset.reader import DatasetReader, open_dataset
 from tactile.dataset.schema import FIELDS, REQUIRED, Dims, FieldSpec, field_spec, validate_sample
 from tactile.dataset.splits import Split, split_indices
+from tactile.dataset.verify import verify_dataset
 from tactile.dataset.writer import DatasetWriter
 
 __all__ = [
@@ -38,4 +40,5 @@ __all__ = [
     "open_dataset",
     "split_indices",
     "validate_sample",
+    "verify_dataset",
 ]

@@ -13,7 +13,9 @@ import typer
 from tactile.dataset.export import export_png
 from tactile.dataset.ingest import ingest_recording
 from tactile.dataset.reader import open_dataset
+from tactile.dataset.verify import verify_dataset
 from tactile.errors import DataError, HandskinError, require_positive
+from tactile.files import require_writable
 
 CLASSES = ("hand", "non_hand")
 
@@ -41,8 +43,11 @@ def export_command(
         bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")
     ] = True,
 ) -> None:
-    """Export a dataset's tactile images and label images as PNG files."""
+    """Export a dataset's tactile images and label images as PNG files.
+
+    OUT must be new, empty, or an export of the same dataset (then resumed, files kept)."""
     try:
+        require_writable(out, "--out", folder=True)
         written = export_png(dataset_dir, out, progress=progress)
     except HandskinError as err:
         _fail(err)
@@ -98,6 +103,7 @@ def ingest_command(
     try:
         require_positive("--step-mm", step_mm, "mm/pixel")
         require_positive("--counts-per-pa", counts_per_pa, "counts/Pa")
+        require_writable(out, "--out", folder=True)
         path = ingest_recording(
             layout,
             frames,
@@ -122,6 +128,13 @@ def select_samples(
     subject : a subject id (int). DataError names an unknown value or an empty selection.
     """
     keep = np.ones(len(ds), dtype=bool)
+    given = {"--class": (cls, "is_hand"), "--action": (action, "action")}
+    for flag, (value, name) in (given | {"--subject": (subject, "subject_id")}).items():
+        if value is not None and name not in ds.fields:
+            raise DataError(
+                f"{flag}: {ds.path} has no {name!r} field (its fields: {', '.join(ds.fields)}). "
+                f"Fix: leave {flag} out"
+            )
     if cls is not None:
         if cls not in CLASSES:
             raise DataError(f"--class {cls!r}: choose one of {', '.join(CLASSES)}")
@@ -141,12 +154,22 @@ def select_samples(
 
 
 def _caption(ds, i: int) -> str:
+    desc = json.loads(ds.sample_field("contactor", i)) if "contactor" in ds.fields else {}
+    if isinstance(desc, list):  # several contacts: each one's name (a hand's with its person)
+        return f"#{i} " + " + ".join(_contact_name(d) for d in desc)
     if "is_hand" in ds.fields and ds["is_hand"][i]:
         names = list(ds.attrs.get("actions", []))
         a = int(ds["action"][i]) if "action" in ds.fields else -1
-        return f"#{i} s{int(ds['subject_id'][i])} {names[a] if 0 <= a < len(names) else ''}"
-    desc = json.loads(ds.sample_field("contactor", i)) if "contactor" in ds.fields else {}
+        who = f"s{int(ds['subject_id'][i])}" if "subject_id" in ds.fields else "hand"
+        return f"#{i} {who} {names[a] if 0 <= a < len(names) else ''}".strip()
     return f"#{i} {desc.get('name', 'non-hand')} {desc.get('press', '')}".strip()
+
+
+def _contact_name(desc: dict) -> str:
+    """ "s7 left_hand" for a hand of subject s0007, the type's name for an object or body part."""
+    person = str(desc.get("subject", ""))
+    number = f"s{int(person[1:])} " if person[1:].isdigit() else ""
+    return f"{number}{desc.get('name', '?')}"
 
 
 def write_sheet(dataset_dir: Path, png: Path, n: int = 24, **filters) -> Path:
@@ -156,14 +179,16 @@ def write_sheet(dataset_dir: Path, png: Path, n: int = 24, **filters) -> Path:
     with open_dataset(dataset_dir) as ds:
         idx = select_samples(ds, n=n, **filters)
         images = np.stack([ds["image"][i] for i in idx])
-        labels = (
-            np.stack([ds["label_image"][i] for i in idx]) if "label_image" in ds.fields else None
+        stack = lambda name: (  # noqa: E731
+            np.stack([ds[name][i] for i in idx]) if name in ds.fields else None
         )
+        labels, instances = stack("label_image"), stack("instance_image")
         title = f"{ds.attrs.get('part', '')}: {len(idx)} of {len(ds)} samples"
         return save_contact_sheet(
             png,
             images,
             labels=labels,
+            instances=instances,
             n_cols=6,
             title=title,
             titles=[_caption(ds, int(i)) for i in idx],
@@ -199,14 +224,49 @@ def sheet_command(
     try:
         if n < 1:
             raise DataError(f"--n {n} is out of range; allowed >= 1")
+        require_writable(png, "--png")
         path = write_sheet(dataset_dir, png, n, cls=cls, action=action, subject=subject)
     except HandskinError as err:
         _fail(err)
     typer.echo(f"contact sheet: {path}")
 
 
+def verify_command(
+    dataset_dir: Annotated[
+        Path,
+        typer.Argument(
+            metavar="DATASET", help="Dataset folder (holding dataset.h5) or the dataset.h5 file."
+        ),
+    ],
+    progress: Annotated[
+        bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")
+    ] = True,
+) -> None:
+    """Check a dataset end to end: content hash, checksums, every sample, map, splits, chunks.
+
+    Exit status 0 when no fault is found, 1 when one is (each named with its fix), 2 when
+    DATASET is not a dataset.
+    """
+    try:
+        report = verify_dataset(dataset_dir, progress=progress)
+    except HandskinError as err:
+        _fail(err)
+    for line in report.ok:
+        typer.echo(f"ok     {line}")
+    for line in report.notes:
+        typer.echo(f"note   {line}")
+    for line in report.faults:
+        typer.echo(f"FAULT  {line}")
+    where = report.path if report.path.exists() else report.path.parent
+    if report.faults:
+        typer.echo(f"error: {len(report.faults)} fault(s) in {where}", err=True)
+        raise typer.Exit(1)
+    typer.echo(f"{where}: no fault found")
+
+
 def register(app: typer.Typer) -> None:
-    """Add `export`, `ingest` and `sheet` to the `handskin` app."""
+    """Add `export`, `ingest`, `sheet` and `verify` to the `handskin` app."""
     app.command("export")(export_command)
     app.command("ingest")(ingest_command)
     app.command("sheet")(sheet_command)
+    app.command("verify")(verify_command)

@@ -3,22 +3,26 @@ atomic writes, and the tactile map + layout stored as plain arrays.
 
 HDF5 stamps every object header with its creation time unless told otherwise; root group, groups
 and datasets are all created here with time tracking off, so the same content written twice gives
-the same bytes.
+the same bytes. Every numeric dataset carries a fletcher32 checksum per HDF5 chunk, so a damaged
+byte fails its read instead of passing unseen. HDF5 writes through a Python file object
+(`tactile.dataset.h5sink.SafeSink`) that never reports a failed write to the library (h5py
+crashes when a file cannot be written): a full disk surfaces once, afterwards, as an
+``OSError`` naming the file.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 
 import h5py
 import numpy as np
 
+from tactile.dataset.h5sink import SafeSink
 from tactile.distortion import DistortionReport
+from tactile.files import atomic_path
 from tactile.layout import TaxelLayout
 from tactile.tactile_map import TactileMap
 
@@ -34,21 +38,7 @@ def canonical_json(obj: object) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
 
 
-@contextlib.contextmanager
-def atomic_path(path: Path) -> Iterator[Path]:
-    """Yield a temporary path in ``path``'s folder; on success it replaces ``path`` atomically.
-
-    On any exception the temporary file is removed and ``path`` is left as it was.
-    """
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
+__all__ = ["atomic_path"]  # re-exported: `tactile.files.atomic_path`
 
 
 def write_json(path: Path, obj: object) -> None:
@@ -62,6 +52,28 @@ def create_file(path: Path) -> h5py.File:
     fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
     fcpl.set_obj_track_times(False)
     return h5py.File(h5py.h5f.create(os.fsencode(path), h5py.h5f.ACC_TRUNC, fcpl=fcpl))
+
+
+_SINKS: dict[int, SafeSink] = {}  # id of an open h5py FileID -> its sink
+
+
+def check_written(f: h5py.File) -> None:
+    """Raise the OSError (naming the file) of a write that failed so far into ``f``, if one did;
+    long writers call it between steps to stop early."""
+    sink = _SINKS.get(id(f.id))
+    if sink is not None and sink.error is not None:
+        raise sink.error
+
+
+def _create_safe(fh, path: Path) -> tuple[h5py.File, SafeSink]:
+    sink = SafeSink(fh)
+    fcpl = h5py.h5p.create(h5py.h5p.FILE_CREATE)
+    fcpl.set_obj_track_times(False)
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_fileobj_driver(h5py.h5fd.fileobj_driver, sink)
+    f = h5py.File(h5py.h5f.create(os.fsencode(path), h5py.h5f.ACC_TRUNC, fcpl=fcpl, fapl=fapl))
+    _SINKS[id(f.id)] = sink
+    return f, sink
 
 
 def group(parent: h5py.Group, name: str) -> h5py.Group:
@@ -79,22 +91,36 @@ def h5_dtype(dtype: str) -> np.dtype:
     return h5py.string_dtype("utf-8") if dtype == "str" else np.dtype(dtype)
 
 
+def filters(dtype: str, level: int = GZIP_LEVEL) -> dict[str, object]:
+    """HDF5 filters of a per-sample field: gzip + shuffle + fletcher32 for numbers; none for
+    variable-length strings (HDF5 filters only their heap references)."""
+    if dtype == "str":
+        return {}
+    return {"compression": "gzip", "compression_opts": level, "shuffle": True, "fletcher32": True}
+
+
 def stacked_dataset(
     parent: h5py.Group, name: str, n: int, shape: tuple[int, ...], dtype: str
 ) -> h5py.Dataset:
     """An (n, *shape) dataset chunked one sample per chunk (scalars: SCALAR_CHUNK per chunk),
-    gzip + shuffle for numbers, no timestamps."""
+    `filters`, no timestamps."""
     chunks = (1, *shape) if shape else (max(1, min(n, SCALAR_CHUNK)),)
-    kw: dict[str, object] = {"compression": "gzip", "compression_opts": GZIP_LEVEL}
-    kw = {} if dtype == "str" else {**kw, "shuffle": True}
     return parent.create_dataset(
-        name, shape=(n, *shape), dtype=h5_dtype(dtype), chunks=chunks, track_times=False, **kw
+        name,
+        shape=(n, *shape),
+        dtype=h5_dtype(dtype),
+        chunks=chunks,
+        track_times=False,
+        **filters(dtype),
     )
 
 
 def plain_dataset(parent: h5py.Group, name: str, data: np.ndarray) -> h5py.Dataset:
-    """A small contiguous dataset (map arrays, split indices), no timestamps."""
-    return parent.create_dataset(name, data=np.asarray(data), track_times=False)
+    """A small dataset (map arrays, split indices) in one HDF5 chunk with a fletcher32
+    checksum (contiguous when empty), no timestamps."""
+    data = np.asarray(data)
+    kw = {"chunks": data.shape, "fletcher32": True} if data.size and data.ndim else {}
+    return parent.create_dataset(name, data=data, track_times=False, **kw)
 
 
 def set_attrs(obj: h5py.HLObject, attrs: dict[str, object]) -> None:
@@ -166,7 +192,19 @@ def copy_tree(src: h5py.Group, dst: h5py.Group) -> None:
 
 
 def write_h5(path: Path, fill: Callable[[h5py.File], None]) -> None:
-    """Create ``path`` atomically: ``fill`` writes into a reproducible temporary file."""
-    with atomic_path(path) as tmp:
-        with create_file(tmp) as f:
-            fill(f)
+    """Create ``path`` atomically: ``fill`` writes into a reproducible temporary file (through a
+    `SafeSink`). A failed write (full disk) raises its OSError, with ``path`` as its filename,
+    after the file is closed; the temporary file is removed and ``path`` left as it was."""
+    with atomic_path(path) as tmp, open(tmp, "r+b", buffering=0) as fh:
+        f, sink = _create_safe(fh, tmp)
+        try:
+            with f:
+                fill(f)
+        except Exception:
+            if sink.error is None:
+                raise
+        finally:
+            _SINKS.pop(id(f.id), None)
+        if sink.error is not None:
+            err = sink.error
+            raise OSError(err.errno, err.strerror, str(path)) from err

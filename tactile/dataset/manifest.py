@@ -3,6 +3,8 @@
 The fingerprint is the sha256 of the canonical JSON (sorted keys, no spaces) of
 ``{"config", "part", "generator_version", "seed"}``. It is written before the first chunk; a run
 pointed at a folder whose manifest differs is refused, so chunks of two configurations never mix.
+Each merge adds ``content``: the sha256 and size of ``dataset.h5`` and ``info.json`` as written,
+which ``handskin verify`` checks.
 """
 
 from __future__ import annotations
@@ -16,19 +18,22 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile.config import record
+from tactile.dataset.folder import DATASET, INFO
 from tactile.dataset.h5io import canonical_json, write_json
 from tactile.errors import DataError
 
 FORMAT = "handskin.dataset/1"
 MANIFEST = "manifest.json"
 IDENTITY = ("config", "part", "generator_version", "seed")
+CONTENT = "content"  # {file name: {"sha256": hex, "bytes": int}} of the merged files
 
 
 def jsonable(obj: object) -> object:
     """A JSON-ready copy: dataclasses -> dicts, tuples -> lists, numpy scalars/arrays -> Python,
     paths -> str. Raises DataError naming the first value JSON cannot hold."""
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return jsonable(dataclasses.asdict(obj))
+        return jsonable(record(obj))
     if isinstance(obj, Mapping):
         return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
@@ -109,3 +114,20 @@ def claim_folder(folder: Path, manifest: dict) -> bool:
         f"on disk, {manifest['fingerprint'][:12]} requested; differing keys: "
         f"{', '.join(keys) or 'format'}. Fix: write to a new --out folder (or delete this one)"
     )
+
+
+def file_digest(path: Path) -> dict[str, object]:
+    """{"sha256": hex digest, "bytes": size} of a file, read in 1 MiB blocks."""
+    digest, size = hashlib.sha256(), 0
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+            size += len(block)
+    return {"sha256": digest.hexdigest(), "bytes": size}
+
+
+def record_content(folder: Path) -> None:
+    """Write the digests of ``dataset.h5`` and ``info.json`` into the folder's manifest."""
+    manifest = read_manifest(folder)
+    manifest[CONTENT] = {name: file_digest(folder / name) for name in (DATASET, INFO)}
+    write_json(folder / MANIFEST, manifest)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import platform
 import shutil
+import zlib
 from importlib import metadata
 from pathlib import Path
 
@@ -17,12 +18,14 @@ import h5py
 import numpy as np
 
 import tactile.dataset.h5io as h5io
+from tactile.dataset.damage import open_h5, read_or_name, repair_hint
 from tactile.dataset.folder import CHUNKS, DATASET, INFO, STATIC, chunk_path, list_chunks
 from tactile.dataset.h5io import json_attr
-from tactile.dataset.manifest import read_manifest
-from tactile.dataset.schema import BY_NAME, STR, Dims, info_fields
+from tactile.dataset.manifest import read_manifest, record_content
+from tactile.dataset.schema import BY_NAME, Dims, info_fields
 from tactile.dataset.splits import METHODS, TRAIN_FRACTION, split_indices
 from tactile.errors import DataError
+from tactile.files import disk_error, remove_stale
 from tactile.labels import CLASS_NAMES, N_CLASSES
 
 PACKAGES = ("numpy", "h5py", "scipy", "scikit-image", "mujoco", "handskin")
@@ -68,7 +71,7 @@ def _scan(folder: Path, ks: list[int]) -> tuple[list[int], dict[str, tuple[int, 
     """Samples per chunk and the per-sample shape of every field (equal in all chunks)."""
     counts, shapes = [], None
     for k in ks:
-        with h5py.File(chunk_path(folder, k), "r") as f:
+        with open_h5(chunk_path(folder, k)) as f:
             got = {n: f[BY_NAME[n].path].shape[1:] for n in json_attr(f, "fields")}
             counts.append(int(f.attrs["n_samples"]))
         if shapes is not None and got != shapes:
@@ -84,16 +87,18 @@ class _Stats:
     """Per-sample ids, class counts and rejects collected while streaming."""
 
     def __init__(self) -> None:
-        self.ids: dict[str, list[np.ndarray]] = {"is_hand": [], "subject_id": [], "instance_id": []}
+        names = ("is_hand", "subject_id", "instance_id", "contact_subject", "contact_instance")
+        self.ids: dict[str, list[np.ndarray]] = {name: [] for name in names}
         self.pixels = np.zeros(N_CLASSES, np.int64)
         self.rejects: dict[str, int] = {}
 
     def add(self, f: h5py.File, fields: dict) -> None:
+        path = Path(f.filename)
         for name in self.ids:
             if name in fields:
-                self.ids[name].append(f[BY_NAME[name].path][()])
+                self.ids[name].append(read_or_name(f[BY_NAME[name].path], name, path))
         if "label_image" in fields:
-            labels = f[BY_NAME["label_image"].path][()]
+            labels = read_or_name(f[BY_NAME["label_image"].path], "label_image", path)
             self.pixels += np.bincount(labels.ravel(), minlength=N_CLASSES)[:N_CLASSES]
         for reason, n in json_attr(f, "rejects").items():
             self.rejects[reason] = self.rejects.get(reason, 0) + int(n)
@@ -111,6 +116,40 @@ class _Stats:
         return out
 
 
+def copy_sample_chunks(src: h5py.Dataset, dst: h5py.Dataset, start: int) -> bool:
+    """Copy ``src``'s samples into ``dst`` from row ``start`` as their stored, compressed HDF5
+    chunks, when both hold one sample per chunk through the same filters (the bytes a fresh
+    compression would write, without recompressing); False, copying nothing, otherwise. Each
+    chunk's deflate stream is checked (its adler32) on the way, and a damaged one is named."""
+    same = _filters(src) == _filters(dst)
+    if not (same and _one_sample_chunks(src) and _one_sample_chunks(dst)):
+        return False
+    if src.compression != "gzip" or not src.fletcher32:
+        return False
+    zero = (0,) * (src.ndim - 1)
+    for j in range(len(src)):
+        mask, data = src.id.read_direct_chunk((j, *zero))
+        try:
+            zlib.decompress(data[:-4])  # the payload; the last 4 bytes are the fletcher32
+        except zlib.error as err:
+            path, field = Path(src.file.filename), src.name.rsplit("/", 1)[-1]
+            read_or_name(src, field, path, j)  # names the damaged sample (DataError)
+            raise DataError(
+                f"{path}: field {field!r} of sample {j} cannot be read (damaged compressed "
+                f"data). {repair_hint(path)}"
+            ) from err
+        dst.id.write_direct_chunk((start + j, *zero), data, mask)
+    return True
+
+
+def _one_sample_chunks(ds: h5py.Dataset) -> bool:
+    return ds.chunks is not None and ds.ndim >= 2 and ds.chunks == (1, *ds.shape[1:])
+
+
+def _filters(ds: h5py.Dataset) -> tuple[object, ...]:
+    return ds.dtype, ds.compression, ds.compression_opts, ds.shuffle, ds.fletcher32
+
+
 def _stream(f: h5py.File, folder: Path, ks: list[int], counts: list[int], shapes: dict) -> _Stats:
     total, stats = sum(counts), _Stats()
     out = {}
@@ -120,12 +159,14 @@ def _stream(f: h5py.File, folder: Path, ks: list[int], counts: list[int], shapes
         out[name] = h5io.stacked_dataset(h5io.group(f, parent), leaf, total, shape, dtype)
     start = 0
     for k, n in zip(ks, counts, strict=True):
-        with h5py.File(chunk_path(folder, k), "r") as src:
+        path = chunk_path(folder, k)
+        with open_h5(path) as src:
             for name in shapes:
                 ds = src[BY_NAME[name].path]
-                is_str = BY_NAME[name].dtype == STR
-                out[name][start : start + n] = ds.asstr()[()] if is_str else ds[()]
+                if not copy_sample_chunks(ds, out[name], start):
+                    out[name][start : start + n] = read_or_name(ds, name, path)
             stats.add(src, shapes)
+        h5io.check_written(f)  # a full disk stops the merge here, not at the end
         start += n
     return stats
 
@@ -162,10 +203,11 @@ def merge_chunks(
 
     def fill(f: h5py.File) -> None:
         stats = _stream(f, folder, ks, counts, shapes)
+        several = stats.column("contact_subject") is not None  # every contact's groups
         split = split_indices(
             stats.column("is_hand"),
-            stats.column("subject_id"),
-            stats.column("instance_id"),
+            stats.column("contact_subject" if several else "subject_id"),
+            stats.column("contact_instance" if several else "instance_id"),
             train_fraction=train_fraction,
             seed=int(manifest["seed"]),
             method=method,
@@ -173,19 +215,35 @@ def merge_chunks(
         g = h5io.group(f, "splits")
         h5io.plain_dataset(g, "train", split.train.astype(np.int64))
         h5io.plain_dataset(g, "test", split.test.astype(np.int64))
-        with h5py.File(folder / CHUNKS / STATIC, "r") as static:
-            h5io.copy_tree(static["map"], h5io.group(f, "map"))
-            extra = dict(static.attrs)
+        extra = _copy_static(folder / CHUNKS / STATIC, f)
         attrs = _root_attrs(manifest, stats, split.report, sum(counts), train_fraction, method)
         h5io.set_attrs(f, {**extra, **attrs})
         info.update(_info(manifest, attrs, shapes, extra, f["map"].attrs["dims"]))
 
     path = folder / DATASET
-    h5io.write_h5(path, fill)
-    h5io.write_json(folder / INFO, info)
+    remove_stale(folder)  # temporary files of a merge that was killed
+    try:
+        h5io.write_h5(path, fill)
+        h5io.write_json(folder / INFO, info)
+        record_content(folder)
+    except OSError as err:
+        need = sum(p.stat().st_size for p in (folder / CHUNKS).iterdir())
+        raise disk_error(err, path, need, "free space there and merge again") from err
     if remove_chunks:
         shutil.rmtree(folder / CHUNKS)
     return path
+
+
+def _copy_static(static: Path, f: h5py.File) -> dict:
+    """Copy the map of ``chunks/static.h5`` into ``f``; return its root attrs."""
+    with open_h5(static) as src:
+        try:
+            h5io.copy_tree(src["map"], h5io.group(f, "map"))
+        except OSError as err:
+            why = str(err).splitlines()[0]
+            msg = f"{static}: the map cannot be read ({why}). {repair_hint(static)}"
+            raise DataError(msg) from None
+        return dict(src.attrs)
 
 
 def _root_attrs(

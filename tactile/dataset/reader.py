@@ -18,6 +18,7 @@ import h5py
 import numpy as np
 
 import tactile.dataset.h5io as h5io
+from tactile.dataset.damage import FieldView, repair_hint
 from tactile.dataset.folder import DATASET, INFO
 from tactile.dataset.readout import Readout
 from tactile.dataset.schema import BY_NAME, FIELDS, STR
@@ -44,9 +45,10 @@ class DatasetReader:
     """Lazy, picklable view of one ``dataset.h5``.
 
     ``len(ds)``: samples S. ``ds[i]``: dict {field: value} of sample i (arrays; str for STR
-    fields). ``ds["raw"]`` or ``ds.raw``: the field's h5py.Dataset, (S, ...) (sliced lazily).
-    ``fields``: names present. ``map``, ``layout``, ``splits``, ``info``, ``attrs``,
-    ``active_threshold_pa``: see below.
+    fields). ``ds["raw"]`` or ``ds.raw``: the field's h5py.Dataset, (S, ...) (sliced lazily;
+    a damaged sample raises DataError naming file, field and sample). ``fields``: names
+    present. ``map``, ``layout``, ``splits``, ``info``, ``attrs``, ``active_threshold_pa``: see
+    below.
     """
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
@@ -103,40 +105,55 @@ class DatasetReader:
     def __repr__(self) -> str:
         return f"DatasetReader({str(self.path)!r}, {self._len} samples, fields={self.fields})"
 
-    def __getitem__(self, key: int | str) -> dict[str, object] | h5py.Dataset:
+    def __getitem__(self, key: int | str) -> dict[str, object] | FieldView:
         if isinstance(key, str):
             if key not in self.fields:
                 raise KeyError(f"no field {key!r} in {self.path}; fields: {', '.join(self.fields)}")
-            return self.file[BY_NAME[key].path]
+            return self._field(key)
         i = int(key)
         if not -self._len <= i < self._len:
             raise IndexError(f"sample {i} out of range for {self._len} samples")
         return {name: self.sample_field(name, i % self._len) for name in self.fields}
 
-    def __getattr__(self, name: str) -> h5py.Dataset:
+    def __getattr__(self, name: str) -> FieldView:
         if name.startswith("_") or name not in self.__dict__.get("fields", ()):
             raise AttributeError(name)
-        return self.file[BY_NAME[name].path]
+        return self._field(name)
+
+    def _field(self, name: str) -> FieldView:
+        return FieldView(self.file[BY_NAME[name].path], name, self.path)
 
     def sample_field(self, name: str, i: int) -> object:
         """One field of sample i: an array, a numpy scalar, or str for STR fields."""
-        ds = self.file[BY_NAME[name].path]
-        return ds.asstr()[i] if BY_NAME[name].dtype == STR else ds[i]
+        view = self._field(name)
+        return view.asstr()[i] if BY_NAME[name].dtype == STR else view[i]
+
+    def _whole(self, read, what: str):
+        """``read()`` of a group that is not per sample; a damaged array is named."""
+        try:
+            return read()
+        except OSError as err:
+            raise DataError(
+                f"{self.path}: {what} cannot be read (checksum mismatch or damaged data: "
+                f"{str(err).splitlines()[0]}). {repair_hint(self.path)}"
+            ) from None
 
     @cached_property
     def map(self) -> TactileMap:
         """The dataset's TactileMap, rebuilt from ``/map`` (same look-up table as at writing)."""
-        return h5io.read_map(self.file["map"])
+        return self._whole(lambda: h5io.read_map(self.file["map"]), "the tactile map (/map)")
 
     @cached_property
     def layout(self) -> TaxelLayout:
         """The part's TaxelLayout from ``/map/layout``."""
-        return h5io.read_layout(self.file["map/layout"])
+        read = lambda: h5io.read_layout(self.file["map/layout"])  # noqa: E731
+        return self._whole(read, "the taxel layout (/map/layout)")
 
     @property
     def splits(self) -> dict[str, np.ndarray]:
         """{"train": (K,) int64, "test": (K',) int64} sample indices."""
-        return {k: v[()] for k, v in self.file["splits"].items()}
+        read = lambda: {k: v[()] for k, v in self.file["splits"].items()}  # noqa: E731
+        return self._whole(read, "the train/test split (/splits)")
 
     @property
     def attrs(self) -> dict[str, object]:

@@ -19,6 +19,7 @@ from tactile.errors import DataError
 from tactile.labels import N_CLASSES
 
 STR = "str"  # dtype marker of variable-length UTF-8 strings (h5py.string_dtype())
+MAX_CONTACTS = 2  # contactors pressing at once in one sample
 
 
 @dataclass(frozen=True)
@@ -86,7 +87,37 @@ FIELDS: tuple[FieldSpec, ...] = (
         "class per pixel (0 for non-hand samples)",
         values=LABELS,
     ),
-    _s("is_hand", "uint8", (), "bool", "1 hand, 0 non-hand", values=(0, 1)),
+    _s(
+        "instance_image",
+        "uint8",
+        ("H", "W"),
+        "contact",
+        "contact per pixel: 0 none, k + 1 for contact k (datasets with several contacts)",
+        values=(0, MAX_CONTACTS),
+    ),
+    _s("is_hand", "uint8", (), "bool", "1 hand (among the contacts), 0 non-hand", values=(0, 1)),
+    _s(
+        "n_contacts",
+        "uint8",
+        (),
+        "count",
+        "contactors pressing in the sample (datasets with several contacts)",
+        values=(1, MAX_CONTACTS),
+    ),
+    _s(
+        "contact_subject",
+        "int32",
+        (MAX_CONTACTS,),
+        "id",
+        "person of each contact, -1 for none or a non-hand (datasets with several contacts)",
+    ),
+    _s(
+        "contact_instance",
+        "int32",
+        (MAX_CONTACTS,),
+        "id",
+        "object / body-part instance of each contact, -1 for none or a hand",
+    ),
     _s("action", "int8", (), "index", "index into attrs['actions'], -1 none", values=(-1, 127)),
     _s(
         "operator_position", "int8", (), "index", "0 front, 1 side, 2 free, -1 none", values=(-1, 2)
@@ -113,6 +144,14 @@ FIELDS: tuple[FieldSpec, ...] = (
         "frames",
         "valid frames of seq_raw",
         values=(0, 32767),
+    ),
+    FieldSpec(
+        "seq_phase_s",
+        "sequences/phase_s",
+        "float32",
+        (4,),
+        "s",
+        "end times of the approach, load, hold and release; frame k is read at 0.1 (k + 1) s",
     ),
 )
 BY_NAME: dict[str, FieldSpec] = {f.name: f for f in FIELDS}

@@ -49,22 +49,30 @@ class Split:
 
 def _ids(values: np.ndarray | None, n: int, name: str) -> np.ndarray:
     if values is None:
-        return np.full(n, -1, dtype=np.int64)
+        return np.full((n, 1), -1, dtype=np.int64)
     arr = np.asarray(values).astype(np.int64)
-    if arr.shape != (n,):
-        raise DataError(f"{name} has shape {arr.shape}; expected ({n},) like the other ids")
-    return arr
+    if arr.ndim not in (1, 2) or len(arr) != n:
+        raise DataError(f"{name} has shape {arr.shape}; expected ({n},) or ({n}, K) ids")
+    return _columns(arr)
+
+
+def _columns(ids: np.ndarray) -> np.ndarray:
+    """(S,) or (S, K) ids as (S, K) (K = 1 for one id per sample)."""
+    ids = np.asarray(ids)
+    return ids[:, None] if ids.ndim == 1 else ids
 
 
 def units(subject_id: np.ndarray, instance_id: np.ndarray) -> np.ndarray:
-    """Unit (connected component) of each sample: (S,) int64. Ids are (S,) int, -1 = none."""
+    """Unit (connected component) of each sample: (S,) int64. Ids are (S,) or (S, K) int (K ids
+    per sample: a sample pressed by several contactors), -1 = none."""
+    subject_id, instance_id = _columns(subject_id), _columns(instance_id)
     n = len(subject_id)
     keys = []  # (sample, key node) edges; key nodes are numbered after the samples
     offset = n
     for ids in (subject_id, instance_id):
-        has = np.flatnonzero(ids >= 0)
-        _, key = np.unique(ids[has], return_inverse=True)
-        keys.append((has, key + offset))
+        sample, slot = np.nonzero(ids >= 0)
+        _, key = np.unique(ids[sample, slot], return_inverse=True)
+        keys.append((sample, key + offset))
         offset += int(key.max(initial=-1)) + 1
     rows = np.concatenate([k[0] for k in keys])
     cols = np.concatenate([k[1] for k in keys])
@@ -74,7 +82,7 @@ def units(subject_id: np.ndarray, instance_id: np.ndarray) -> np.ndarray:
 
 def unit_keys(unit: np.ndarray, subject_id: np.ndarray, instance_id: np.ndarray) -> np.ndarray:
     """(U, 2) int64 key of each unit: (0, smallest subject id), else (1, smallest instance id),
-    else (2, index of its one sample). ``unit`` is :func:`units`' output, ids (S,) int."""
+    else (2, index of its one sample). ``unit`` is :func:`units`' output, ids (S,) or (S, K)."""
     n_units = int(unit.max(initial=-1)) + 1
     keys = np.zeros((n_units, 2), np.int64)
     big = np.iinfo(np.int64).max
@@ -82,9 +90,10 @@ def unit_keys(unit: np.ndarray, subject_id: np.ndarray, instance_id: np.ndarray)
     np.minimum.at(first, unit, np.arange(len(unit), dtype=np.int64))
     keys[:, 0], keys[:, 1] = 2, first
     for kind, ids in ((1, instance_id), (0, subject_id)):  # subjects last: they win
+        ids = _columns(ids)
         low = np.full(n_units, big)
-        has = ids >= 0
-        np.minimum.at(low, unit[has], ids[has].astype(np.int64))
+        sample, slot = np.nonzero(ids >= 0)
+        np.minimum.at(low, unit[sample], ids[sample, slot].astype(np.int64))
         found = low < big
         keys[found, 0], keys[found, 1] = kind, low[found]
     return keys
@@ -135,10 +144,11 @@ def split_indices(
 ) -> Split:
     """Group-disjoint, class-stratified train/test split of S samples.
 
-    is_hand : (S,) 0/1, or None (one stratum). subject_id, instance_id : (S,) int, -1 = none, or
-    None. train_fraction : float in (0, 1). seed : int. method : one of ``METHODS`` (module
-    docstring). stream : int, ``"keyed"`` only — another stream gives independent draws from the
-    same seed (a validation split inside a keyed train split). Returns a :class:`Split`.
+    is_hand : (S,) 0/1, or None (one stratum). subject_id, instance_id : (S,) or (S, K) int
+    (K per sample when several contactors press), -1 = none, or None. train_fraction : float
+    in (0, 1). seed : int. method : one of ``METHODS`` (module docstring). stream : int,
+    ``"keyed"`` only — another stream gives independent draws from the same seed (a validation
+    split inside a keyed train split). Returns a :class:`Split`.
     """
     if not 0.0 < train_fraction < 1.0:
         raise DataError(f"train_fraction must be in (0, 1), got {train_fraction}")

@@ -27,6 +27,7 @@ from tactile.dataset.manifest import claim_folder, jsonable, make_manifest
 from tactile.dataset.merge import merge_chunks
 from tactile.dataset.schema import BY_NAME, STR, Dims, validate_sample
 from tactile.errors import DataError
+from tactile.files import remove_stale
 from tactile.layout import TaxelLayout
 from tactile.tactile_map import TactileMap
 
@@ -107,9 +108,9 @@ class DatasetWriter:
         h5io.set_attrs(f["map"], {"dims": np.array([self.dims.n_taxels, *tmap.shape, seq])})
 
     def _remove_stale_temporaries(self) -> None:
-        """Delete temporary chunk files left by a killed run (never complete chunks)."""
-        for p in (self.folder / CHUNKS).glob(".chunk_*.tmp"):
-            p.unlink()
+        """Delete temporary files left by a killed run (never complete chunks)."""
+        remove_stale(self.folder / CHUNKS)
+        remove_stale(self.folder)
 
     def complete_chunks(self) -> list[int]:
         """Indices of the chunks already on disk (a resumed run skips them)."""
@@ -173,13 +174,11 @@ def _fill_chunk(
         parent, leaf = spec.path.split("/")
         values = [s[name] for s in samples]
         data = np.array(values, dtype=object) if spec.dtype == STR else np.stack(values)
-        dtype = h5io.h5_dtype(spec.dtype)
+        kw = h5io.filters(spec.dtype)  # the merged file's: the merge copies the chunks as stored
+        if kw and data.ndim > 1:
+            kw["chunks"] = (1, *data.shape[1:])  # one sample per HDF5 chunk: damage is named
         h5io.group(f, parent).create_dataset(
-            leaf,
-            data=data,
-            dtype=dtype,
-            track_times=False,
-            **({} if spec.dtype == STR else {"compression": "gzip", "compression_opts": 1}),
+            leaf, data=data, dtype=h5io.h5_dtype(spec.dtype), track_times=False, **kw
         )
     h5io.set_attrs(
         f, {"chunk": int(k), "n_samples": len(samples), "fields": list(fields), "rejects": rejects}

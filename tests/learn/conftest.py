@@ -184,3 +184,105 @@ def resume_after_edit(run, data, folder, edit):
     edit(ckpt["config"])
     save_checkpoint(ckpt, last)
     return full, fit(run, data, folder / "cut", resume=True, progress=False)
+
+
+# ---- press sequences (action recognition) -------------------------------------------------------
+
+ACTIONS = (
+    "grasp",
+    "grasp_twist_cw",
+    "grasp_twist_ccw",
+    "push_left",
+    "push_right",
+    "push_away",
+    "pull",
+    "free",
+)
+SEQ_STORED = 14  # frames of the stored sequences (one press is longer than the networks' 12)
+SEQ_BASELINE, SEQ_DRIFT = 100.0, 20.0  # counts, counts/s: frames read at the wrong time differ
+#: per action: (shift along s, shift along z) mm per frame, turn degrees per frame
+SEQ_MOTION = {
+    "grasp": (0, 0, 0),
+    "grasp_twist_cw": (0, 0, -8),
+    "grasp_twist_ccw": (0, 0, 8),
+    "push_left": (3, 0, 0),
+    "push_right": (-3, 0, 0),
+    "push_away": (0, 3, 0),
+    "pull": (0, -3, 0),
+    "free": (0, 0, 0),
+}
+
+
+def press_frame(flat_mm: np.ndarray, action: str, k: int, rng_offset: np.ndarray) -> np.ndarray:
+    """(N,) Pa of frame k of a press: a 14 x 30 mm bar (a 6 mm disc for "free") moved and
+    turned by ``SEQ_MOTION`` each frame from its start ``rng_offset`` (mm)."""
+    ds, dz, turn = SEQ_MOTION[action]
+    angle = np.deg2rad(30 + turn * k)
+    rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    s, z = ((flat_mm - rng_offset - [ds * k, dz * k]) @ rot).T
+    inside = np.hypot(s, z) < 6 if action == "free" else (np.abs(s) < 7) & (np.abs(z) < 15)
+    return np.where(inside, 500.0 + 40.0 * k, 0.0)
+
+
+def sequence_sample(i: int, tmap: TactileMap, flat_mm: np.ndarray) -> dict:
+    """Sample i of the tiny sequence set: hands (i < 32) press action i % 8 for 5-7 frames
+    (sample 3: 13), subject i // 4, right or left hand by subject; then 4 objects (no action)."""
+    rng = np.random.default_rng(np.random.SeedSequence(11, spawn_key=(i,)))
+    hand = i < 32
+    action = ACTIONS[i % 8] if hand else "grasp"
+    n = 13 if i == 3 else int(rng.integers(5, 8))
+    start = rng.uniform(-8, 8, 2)
+    t_s = 0.1 * (np.arange(SEQ_STORED) + 1)
+    p = np.stack([press_frame(flat_mm, action, k, start) for k in range(n)])
+    raw = np.zeros((SEQ_STORED, len(flat_mm)), np.uint16)
+    raw[:n] = np.round(SEQ_BASELINE + SEQ_DRIFT * t_s[:n, None] + GAIN * p)
+    side = ("right_hand", "left_hand")[(i // 4) % 2]
+    contactor = {"kind": "hand", "type": side} if hand else {"kind": "object", "type": "ball"}
+    return {
+        "raw": raw[n - 1],
+        "pressure_pa": p[-1].astype(np.float32),
+        "image": tmap.image(p[-1]),
+        "is_hand": np.uint8(hand),
+        "action": np.int8(ACTIONS.index(action) if hand else -1),
+        "subject_id": np.int32(i // 4 if hand else -1),
+        "instance_id": np.int32(-1 if hand else i - 32),
+        "contactor": json.dumps(contactor),
+        "time_s": np.float32(t_s[n - 1]),
+        "seq_raw": raw,
+        "seq_length": np.int16(n),
+        "seq_phase_s": np.float32([0.1, 0.25, 0.45, 0.1 * n]),
+    }
+
+
+def write_tiny_sequences(folder, n: int = 36):
+    """The tiny sequence set (`sequence_sample` 0..n-1) in ``folder``; returns the folder."""
+    layout, flat_mm = cylinder_sector_layout(width_mm=60, length_mm=90, pitch_mm=5)
+    tmap = TactileMap.build(layout)
+    attrs = {
+        "actions": list(ACTIONS),
+        "skin_counts_per_pa": GAIN,
+        "skin_baseline_counts": SEQ_BASELINE,
+        "skin_drift_counts_per_s": SEQ_DRIFT,
+        "skin_noise_floor_counts": 1.0,
+    }
+    writer = DatasetWriter(
+        folder,
+        config={"test": "tiny sequences"},
+        part="sector",
+        generator_version="t",
+        seed=5,
+        tmap=tmap,
+        layout=layout,
+        seq_len=SEQ_STORED,
+        attrs=attrs,
+    )
+    writer.write_chunk(0, [sequence_sample(i, tmap, flat_mm) for i in range(n)])
+    writer.merge()
+    return folder
+
+
+@pytest.fixture(scope="session")
+def tiny_sequences(tmp_path_factory):
+    """Folder of a 36-sample dataset with press sequences: 32 hand presses (8 subjects, every
+    action 4 times), 4 object touches."""
+    return write_tiny_sequences(tmp_path_factory.mktemp("learn_sequences") / "tiny")

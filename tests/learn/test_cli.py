@@ -233,12 +233,15 @@ def _digest(folder) -> dict:
 
 def test_a_run_folder_is_never_written_over(app, tiny_dataset, tiny_writer, small_config, tmp_path):
     """best.pt without last.pt is refused by a fresh start and by --resume, nothing changed;
-    --resume on an empty folder says it starts afresh; --resume on other data is refused,
-    naming both."""
+    --resume with nothing to resume is refused, nothing written; --resume on other data is
+    refused, naming both."""
     base = ["train", str(tiny_dataset), "--config", str(small_config), "--no-progress"]
     run = tmp_path / "run"
     res = runner.invoke(app, [*base, "--out", str(run), "--resume", "--epochs", "1"])
-    assert res.exit_code == 0 and "holds no last.pt, so a new run starts there" in res.output
+    assert res.exit_code == 2 and "holds no last.pt, so there is no run to resume" in res.output
+    assert not run.exists()
+    res = runner.invoke(app, [*base, "--out", str(run), "--epochs", "1"])
+    assert res.exit_code == 0, res.output
     (run / "last.pt").unlink()
     before = _digest(run)
     for extra in ([], ["--resume"]):

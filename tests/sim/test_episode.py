@@ -202,7 +202,24 @@ def test_sample_does_not_depend_on_keep_sequence():
     for i in (10, 11, 12):
         kept, _ = sample_hand(i, 0, forearm, subjects, keep_sequence=True)
         plain, _ = sample_hand(i, 0, forearm, subjects, keep_sequence=False)
-        assert set(kept) - set(plain) == {"seq_raw", "seq_length"}
+        assert set(kept) - set(plain) == {"seq_raw", "seq_length", "seq_phase_s"}
         for key, value in plain.items():
             assert np.array_equal(np.asarray(kept[key]), np.asarray(value)), key
         assert int(kept["seq_length"]) > round(float(plain["time_s"]) / FRAME_DT_S)
+
+
+def test_sequence_phases_end_where_the_frames_do():
+    """A kept sequence holds one 10 Hz frame per 0.1 s up to the end of its release, the last
+    of the four phase ends (increasing), unless an unstable release frame cut it short."""
+    from sim.generate_hands import sample_hand
+    from sim.subjects import sample_subjects
+
+    forearm = EpisodeContext()
+    subjects = sample_subjects(4, np.random.default_rng(0))
+    for i in (3, 4):
+        kept, _ = sample_hand(i, 0, forearm, subjects, keep_sequence=True)
+        phases = kept["seq_phase_s"]
+        assert phases.shape == (4,) and (np.diff(phases) > 0).all()
+        assert int(kept["seq_length"]) <= int(np.floor(phases[-1] / FRAME_DT_S + 1e-6))
+        assert int(kept["seq_length"]) >= int(np.floor(phases[2] / FRAME_DT_S + 1e-6))
+        assert float(kept["time_s"]) <= phases[2] + 1e-6  # selected within load and hold

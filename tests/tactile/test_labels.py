@@ -156,3 +156,19 @@ def test_label_image_equals_the_all_classes_reference(seed: int):
     np.testing.assert_array_equal(
         label_image(tmap, p, labels), _label_image_all_classes(tmap, p, labels)
     )
+
+
+def test_contact_instances_groups_by_gap_orders_by_load_and_drops_noise():
+    """Three pressed groups on a line (taxels 10 mm apart in each, groups 80 mm apart) and a
+    lone taxel: a chain of 10 mm steps is one contact, 80 mm is a gap, the lone taxel is noise;
+    contacts are numbered by summed pressure."""
+    from tactile.labels import contact_instances
+
+    x = np.concatenate([np.arange(4) * 0.01, 0.11 + np.arange(5) * 0.01, [0.30]])
+    positions = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    p = np.array([1.0] * 4 + [3.0] * 5 + [9.0])
+    got = contact_instances(positions, p, threshold=0.5, gap_m=0.05, min_taxels=3)
+    np.testing.assert_array_equal(got, [2, 2, 2, 2, 1, 1, 1, 1, 1, 0])
+    p[1] = 0.0  # a released taxel splits nothing here (10 mm + 10 mm < 50 mm) and is not pressed
+    assert contact_instances(positions, p, threshold=0.5, gap_m=0.05)[1] == 0
+    assert contact_instances(positions, np.zeros(len(x))).max() == 0

@@ -180,7 +180,7 @@ def test_plain_columns_and_plain_xyz_need_units(tmp_path, units, scale):
     (tmp_path / "plain.csv").write_text("x,y,z\n" + "\n".join(",".join(map(str, p)) for p in pts))
     (tmp_path / "plain.txt").write_text("# x y z\n" + "\n".join(" ".join(map(str, p)) for p in pts))
     for name in ("plain.csv", "plain.txt"):
-        with pytest.raises(LayoutError, match=r"units='m' or units='mm'"):
+        with pytest.raises(LayoutError, match=r"--units m or mm; in Python units='m' or 'mm'"):
             TaxelLayout.load(tmp_path / name)
         layout = TaxelLayout.load(tmp_path / name, units=units)
         np.testing.assert_allclose(layout.positions_m, pts * scale)
