@@ -46,28 +46,36 @@ def choose_default(speeds, accs, n_test: int, same_prints=None) -> Choice | None
     return Choice(max(near, key=lambda i: speeds[i]), best, tol)
 
 
+def _speed(row: dict) -> float:
+    return row["per_core"]
+
+
 def speed_figure(rows: list[dict], key: str, ylabel: str, chosen=None, band=None, paper_line=None):
-    """Test metric (%) against generation speed (samples per CPU-second, log x), one labelled
-    point per setting; the current default a star, the chosen setting ringed, ``band`` (low,
-    high) % shaded (the rule's tolerance), ``paper_line`` (value %, label) dashed."""
-    from matplotlib.figure import Figure  # start-up time: matplotlib
+    """Test metric (%) against generation speed (samples per CPU-second, log x), a point per
+    setting in its own colour, named in the legend; the current default a star, the chosen
+    setting ringed, ``band`` (low, high) % shaded (the rule's tolerance), ``paper_line`` (value
+    %, label) dashed."""
+    from matplotlib import ticker  # start-up time: matplotlib
+    from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7.5, 4.8), layout="constrained")
     ax = fig.subplots()
-    pts = [r for r in rows if r["per_core"] and r.get(key) is not None]
-    for k, r in enumerate(pts):
+    pts = sorted((r for r in rows if r["per_core"] and r.get(key) is not None), key=_speed)
+    for k, r in enumerate(pts):  # a colour per setting, named in the legend (no crowded labels)
         xy, default = (r["per_core"], r[key]), r["name"] == FS.DEFAULT
-        style = {"s": 160, "marker": "*", "c": "C3"} if default else {"s": 60, "c": "C0"}
-        label = "current default" if default else "setting" if k == 0 else None
-        ax.scatter(*xy, zorder=3, label=label, **style)
-        ax.annotate(r["name"], xy, textcoords="offset points", xytext=(6, 5), fontsize=8)
+        style = {"s": 180, "marker": "*"} if default else {"s": 60}
+        name = f"{r['name']} (current default)" if default else r["name"]
+        ax.scatter(*xy, zorder=3, c=f"C{k % 10}", label=name, **style)
         if r["name"] == chosen:
-            ax.scatter(*xy, s=420, facecolors="none", edgecolors="C2", label="chosen by the rule")
+            ax.scatter(*xy, s=420, facecolors="none", edgecolors="0.2", label="chosen by the rule")
     if band is not None:
         ax.axhspan(*band, color="C2", alpha=0.12, label="within the rule's tolerance of the best")
     if paper_line is not None:
         ax.axhline(paper_line[0], color="0.4", ls="--", lw=1, label=paper_line[1])
     ax.set_xscale("log")
+    ax.xaxis.set_major_locator(ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+    ax.xaxis.set_major_formatter("{x:g}")  # plain numbers, not 3 x 10^0
+    ax.xaxis.set_minor_formatter("")
     ax.set_xlabel("generation speed (samples per CPU-second, log scale)")
     ax.set_ylabel(ylabel)
     ax.grid(True, which="both", alpha=0.3)
