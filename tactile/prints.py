@@ -74,7 +74,9 @@ class Prints:
 
 def contactor_columns(contactors, is_hand) -> dict[str, np.ndarray]:
     """Columns of the samples' JSON contactor descriptions: kind ("hand" / "non_hand" from
-    ``is_hand`` when absent), subject, side, sex (str, "" unknown), hand_length_m (float, NaN)."""
+    ``is_hand`` when absent), subject, side, sex (str, "" unknown), hand_length_m (float, NaN).
+    A sample of several contacts (a JSON list) is described by its first hand, else its first
+    contact, as its ``action`` and ``subject_id`` are."""
     kinds = np.where(np.asarray(is_hand) > 0, "hand", "non_hand").astype(object)
     n = len(kinds)
     cols = {k: np.full(n, "", dtype=object) for k in ("subject", "side", "sex")}
@@ -84,6 +86,8 @@ def contactor_columns(contactors, is_hand) -> dict[str, np.ndarray]:
             desc = json.loads(text.decode() if isinstance(text, bytes) else text)
         except (ValueError, AttributeError):
             continue
+        if isinstance(desc, list) and desc:  # several contacts: the lead, as the sample's
+            desc = next((d for d in desc if d.get("kind") == "hand"), desc[0])  # action, person
         if not isinstance(desc, dict):
             continue
         kinds[i] = str(desc.get("kind", kinds[i]))

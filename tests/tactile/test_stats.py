@@ -17,7 +17,7 @@ from tactile import TactileMap
 from tactile.anchors import ANCHORS
 from tactile.dataset import DatasetWriter, open_dataset
 from tactile.dataset.ingest import ingest_recording
-from tactile.prints import bootstrap_mean, bootstrap_share, read_prints
+from tactile.prints import bootstrap_mean, bootstrap_share, contactor_columns, read_prints
 from tactile.stats import MISSING, dataset_stats, stats_markdown
 from tactile.synthetic import cylinder_sector_layout
 
@@ -329,3 +329,13 @@ def test_samples_by_contacts_are_the_hand_counted_ones(mixed, dataset):
     assert "Several contacts at once" not in stats_markdown([plain])
     both = stats_markdown([plain, dataset_stats(mixed)])
     assert "| all | mixed | 2 | 4 |" in both and "| made |" not in both.split("Several")[1]
+
+
+def test_a_sample_of_several_contacts_is_described_by_its_first_hand():
+    rake = {"kind": "object", "name": "rake"}
+    hand = {"kind": "hand", "subject": "s0003", "type": "left_hand", "sex": "female"}
+    texts = [json.dumps([rake, hand]), json.dumps([rake, {"kind": "body", "name": "arm"}])]
+    cols = contactor_columns(np.array(texts, dtype=object), np.array([1, 0]))
+    assert list(cols["kind"]) == ["hand", "object"]
+    assert list(cols["subject"]) == ["s0003", ""] and list(cols["side"]) == ["left", ""]
+    assert list(cols["sex"]) == ["female", ""]
