@@ -19,7 +19,7 @@ from pathlib import Path
 
 import typer
 
-from learn.cli import fail, needs_torch
+from learn.cli.options import fail, needs_torch
 from tactile.errors import HandskinError
 
 #: name -> typer command of every registered experiment
@@ -31,7 +31,7 @@ def experiment(name: str) -> Callable[[Callable[..., Path]], Callable[..., None]
 
     The function returns the path of the report it wrote. A user error (``HandskinError``)
     prints ``error: <what and how to fix>`` and exits with status 2; without PyTorch the
-    command stops with the install hint (``learn.cli.needs_torch``).
+    command stops with the install hint (``learn.cli.options.needs_torch``).
     """
 
     def register(command: Callable[..., Path]) -> Callable[..., None]:

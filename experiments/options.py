@@ -1,6 +1,6 @@
 """Command-line options and input checks shared by the experiments (torch-free).
 
-``learn.cli`` gives the options every command of handskin shares (``--seed``, ``--device``,
+``learn.cli.options`` gives the options every command of handskin shares (``--seed``, ``--device``,
 ``--progress``); these are the experiments' own. Checks raise before any work, naming the flag.
 """
 
@@ -11,7 +11,7 @@ from typing import Annotated
 
 import typer
 
-from learn.cli import DeviceOpt, ProgressOpt, SeedOpt, opt
+from learn.cli.options import DeviceOpt, ProgressOpt, SeedOpt, opt
 from tactile.errors import ConfigError, DataError, require_folder
 from tactile.files import require_writable
 

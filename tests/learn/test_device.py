@@ -68,7 +68,7 @@ def test_gpu_toml_is_the_gpu_preset():
     from pathlib import Path
 
     from learn import config as C
-    from learn.cli import resolve_run
+    from learn.cli.train import resolve_run
 
     toml = Path(__file__).resolve().parents[2] / "docs" / "segnet_gpu.toml"
     run = resolve_run("segnet", toml, {"device": "cuda"}, False)

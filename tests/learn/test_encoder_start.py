@@ -22,7 +22,7 @@ def _train(args: list[str]):
 def test_the_classifier_is_the_documented_recipe(tmp_path):
     """The classifier's run equals the one docs/learning.md trained by hand: the vgg16 preset
     with `epochs = 20, lr_drop_period_epochs = 14` in a run TOML (here at seed 3)."""
-    from learn.cli import resolve_run
+    from learn.cli.train import resolve_run
     from learn.train.encoder import encoder_run
 
     toml = tmp_path / "vgg.toml"
@@ -90,7 +90,7 @@ def test_the_segmenter_starts_from_the_classifier_trained_first(tiny_dataset, tm
 def test_the_encoder_start_applies_to_segmenters_on_a_dataset_only(tiny_dataset, tmp_path):
     """By default a segmenter on a handskin dataset; not with --from-scratch, a classifier, a
     start of its own (--init), a cross-validation, or an image folder."""
-    from learn.cli import resolve_run
+    from learn.cli.train import resolve_run
     from learn.train.encoder import wanted
 
     (tmp_path / "imgs").mkdir()

@@ -10,7 +10,7 @@ import pytest
 import torch
 from torch import nn
 
-from learn.cli import resolve_run
+from learn.cli.train import resolve_run
 from learn.config import RunConfig, load_run_config, run_from_dict
 from learn.data.load import TensorData, load_data
 from learn.train import device
