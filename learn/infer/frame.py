@@ -37,12 +37,11 @@ Box = tuple[int, int, int, int]  # rows r0:r1, columns c0:c1 of the map grid, pi
 @dataclass(frozen=True)
 class ImageOps:
     """The look-up table as dense (K, H, W) planes (``taxels`` int32, ``weights`` float64, in
-    the table's own order, zero-padded) and each taxel's pixel box ``reach`` (N, 4): rows
-    r0:r1, columns c0:c1 it colours (empty for an unplaced taxel)."""
+    the table's own order, zero-padded) beside the map they come from."""
 
+    tmap: TactileMap
     taxels: np.ndarray
     weights: np.ndarray
-    reach: np.ndarray
     erode_px: int = 2
     dilate_px: int = 4
 
@@ -56,26 +55,14 @@ class ImageOps:
         taxels = np.zeros((k, height * width), np.int32)
         weights = np.zeros((k, height * width), np.float64)
         taxels[slot, row], weights[slot, row] = lut.indices, lut.data
-        reach = np.tile([height, 0, width, 0], (tmap.n_taxels, 1))
-        r, c = np.divmod(row, width)
-        np.minimum.at(reach[:, 0], lut.indices, r)
-        np.maximum.at(reach[:, 1], lut.indices, r + 1)
-        np.minimum.at(reach[:, 2], lut.indices, c)
-        np.maximum.at(reach[:, 3], lut.indices, c + 1)
         shape = (k, height, width)
-        return cls(taxels.reshape(shape), weights.reshape(shape), reach, erode_px, dilate_px)
+        return cls(tmap, taxels.reshape(shape), weights.reshape(shape), erode_px, dilate_px)
 
     def box(self, p: np.ndarray) -> Box | None:
-        """The map box a frame ``p`` (N,) Pa can make non-zero, grown by a margin wider than the
-        erosion and dilation disks; None when no taxel is pressed."""
-        reach = self.reach[p > 0]
-        if not len(reach):
-            return None
-        height, width = self.taxels.shape[1:]
-        m = self.erode_px + self.dilate_px + 1
-        r0, c0 = reach[:, 0].min() - m, reach[:, 2].min() - m
-        r1, c1 = reach[:, 1].max() + m, reach[:, 3].max() + m
-        return max(r0, 0), min(r1, height), max(c0, 0), min(c1, width)
+        """The map box a frame ``p`` (N,) Pa can make non-zero (`TactileMap.support_box`), grown
+        by a margin wider than the erosion and dilation disks; None when it lights no pixel."""
+        box = self.tmap.support_box(p > 0, self.erode_px + self.dilate_px + 1)
+        return None if box is None else (box[0].start, box[0].stop, box[1].start, box[1].stop)
 
     def fill(self, p: np.ndarray, image: np.ndarray, last: Box | None = None) -> Box | None:
         """Write ``tmap.image(p)`` into ``image`` (H, W) uint8, zero but on ``last`` (the box
