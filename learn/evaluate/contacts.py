@@ -26,6 +26,7 @@ from tactile.prints import bootstrap_mean
 
 BOOT_SEED = 0  # seed of the accuracy's bootstrap interval
 KEY = "by_contacts"  # the report row's key
+HAND, NO_HAND = "hand", "no hand"  # classifier groups "<k> hand": a hand among the k contacts
 
 
 @dataclass(frozen=True)
@@ -58,8 +59,9 @@ def contact_scores(
 ) -> dict:
     """``{KEY: {"1": ..., "2": ...}}`` of predictions ``pred`` against ``y`` ((S,) or (S, h, w)),
     per number of contacts present: classify, ``n`` samples, ``accuracy`` and its 95 %
-    percentile bootstrap interval ``low``, ``high`` over samples (fractions); segment, ``n`` hand
-    samples and their confusion matrix ``cm`` (C, C) (rows true)."""
+    percentile bootstrap interval ``low``, ``high`` over samples (fractions), also for the
+    samples of a hand among them (``"<k> hand"``) and of none (``"<k> no hand"``); segment,
+    ``n`` hand samples and their confusion matrix ``cm`` (C, C) (rows true)."""
     if len(pred) != len(contacts.n) or len(y) != len(contacts.n):
         raise DataError(
             f"{len(contacts.n)} test rows have contacts, {len(y)} were scored: the test split "
@@ -68,10 +70,14 @@ def contact_scores(
     out = {}
     for k in np.unique(contacts.n).tolist():
         if task == "classify":
-            sel = torch.from_numpy(contacts.n == k)
-            correct = (pred[sel] == y[sel]).numpy().astype(float)
-            acc, low, high = bootstrap_mean(correct, seed=BOOT_SEED)
-            out[str(k)] = {"n": len(correct), "accuracy": acc, "low": low, "high": high}
+            count, hand = contacts.n == k, contacts.hand
+            groups = {str(k): count, f"{k} {HAND}": count & hand, f"{k} {NO_HAND}": count & ~hand}
+            for key, rows in groups.items():
+                if rows.any():
+                    sel = torch.from_numpy(rows)
+                    correct = (pred[sel] == y[sel]).numpy().astype(float)
+                    acc, low, high = bootstrap_mean(correct, seed=BOOT_SEED)
+                    out[key] = {"n": len(correct), "accuracy": acc, "low": low, "high": high}
         else:
             sel = torch.from_numpy((contacts.n == k) & contacts.hand)
             cm = M.confusion_matrix(y[sel], pred[sel], num_classes)
@@ -85,7 +91,10 @@ def _pct(v: float) -> str:
 
 def _contacts(k: str, task: str) -> str:
     if task == "classify":
-        return "1 contact" if k == "1" else f"{k} contacts"
+        n, _, group = k.partition(" ")
+        words = "1 contact" if n == "1" else f"{n} contacts"
+        among = "a hand" if n == "1" else "a hand among them"
+        return words + {"": "", HAND: f", {among}", NO_HAND: ", no hand"}[group]
     return "1 (a hand)" if k == "1" else f"{k}, a hand among them"
 
 
@@ -101,7 +110,8 @@ def contacts_section(rows: list[dict], labels: list[str]) -> list[str]:
         "",
         "The test split by the contactors pressing at once (`n_contacts`). Classifiers: every "
         "test sample, accuracy with its 95 % percentile bootstrap interval over the samples "
-        f"(seed {BOOT_SEED}). Segmenters: the hand samples they are scored on, 2 contacts being "
+        f"(seed {BOOT_SEED}), then those with a hand among the contacts and those without. "
+        "Segmenters: the hand samples they are scored on, 2 contacts being "
         "the multi-contact hands (a hand beside a second hand, an object or a body part); "
         "hand-pixel mIoU as in the table on the hand's pixels.",
         "",

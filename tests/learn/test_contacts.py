@@ -60,13 +60,15 @@ def mixed(tmp_path_factory):
     return folder
 
 
-def slow_accuracy(pred, y, n) -> dict[int, tuple[int, int]]:
-    """{contacts: (samples, right)} counted sample by sample."""
-    out: dict[int, list[int]] = {}
-    for p, t, k in zip(pred.tolist(), y.tolist(), n.tolist(), strict=True):
-        tally = out.setdefault(k, [0, 0])
-        tally[0] += 1
-        tally[1] += int(p == t)
+def slow_accuracy(pred, y, n, hand) -> dict[str, tuple[int, int]]:
+    """{group: (samples, right)} counted sample by sample; groups "k" (k contacts), "k hand"
+    (a hand among them) and "k no hand"."""
+    out: dict[str, list[int]] = {}
+    for p, t, k, h in zip(pred.tolist(), y.tolist(), n.tolist(), hand.tolist(), strict=True):
+        for group in (str(k), f"{k} hand" if h else f"{k} no hand"):
+            tally = out.setdefault(group, [0, 0])
+            tally[0] += 1
+            tally[1] += int(p == t)
     return {k: tuple(v) for k, v in out.items()}
 
 
@@ -75,8 +77,9 @@ def test_scores_by_contacts_match_a_count_sample_by_sample():
     n, hand = rng.integers(1, 3, 40), rng.random(40) < 0.6
     y, pred = torch.from_numpy(rng.integers(0, 2, 40)), torch.from_numpy(rng.integers(0, 2, 40))
     got = contact_scores(pred, y, SplitContacts(n, hand), "classify", 2)[KEY]
-    for k, (samples, right) in slow_accuracy(pred, y, n).items():
-        s = got[str(k)]
+    assert set(got) == {"1", "1 hand", "1 no hand", "2", "2 hand", "2 no hand"}
+    for k, (samples, right) in slow_accuracy(pred, y, n, hand).items():
+        s = got[k]
         assert s["n"] == samples and s["accuracy"] == pytest.approx(right / samples)
         assert s["low"] <= s["accuracy"] <= s["high"]
     # segmentation: hand samples only, one confusion matrix per number of contacts
@@ -100,7 +103,7 @@ def test_evaluate_scores_each_test_sample_by_its_contacts(checkpoints, mixed, tm
         model_from_checkpoint(load_checkpoint(checkpoints[a]))[0] for a in ("handsnet", "segnet")
     )
     clf_size, seg_size = rows[0]["input_size"], rows[1]["input_size"]
-    tally: dict[int, list[int]] = {}
+    tally: dict[str, list[int]] = {}
     hand_x, hand_y, hand_k = [], [], []
     with DatasetReader(mixed) as r, torch.no_grad():
         for i in r.splits["test"]:
@@ -108,7 +111,8 @@ def test_evaluate_scores_each_test_sample_by_its_contacts(checkpoints, mixed, tm
             image = r.image[i].astype(np.float32) / 255
             x = torch.from_numpy(net_input(image, clf_size, "classify"))[None, None]
             right = int(clf_net.eval()(x).argmax(1)) == int(r.is_hand[i])
-            tally[k] = [a + b for a, b in zip(tally.get(k, [0, 0]), (1, right), strict=True)]
+            for g in (str(k), f"{k} hand" if r.is_hand[i] else f"{k} no hand"):
+                tally[g] = [a + b for a, b in zip(tally.get(g, [0, 0]), (1, right), strict=True)]
             if r.is_hand[i]:
                 hand_x.append(torch.from_numpy(net_input(image, seg_size, "segment"))[None])
                 hand_y.append(torch.from_numpy(net_labels(r.label_image[i], seg_size)))
@@ -119,10 +123,10 @@ def test_evaluate_scores_each_test_sample_by_its_contacts(checkpoints, mixed, tm
     for p, y, k in zip(pred, hand_y, hand_k, strict=True):
         cms[k] += M.confusion_matrix(y, p, 7).numpy()
     clf, seg = rows[0][KEY], rows[1][KEY]
-    assert set(clf) == {"1", "2"} and sum(s["n"] for s in clf.values()) == rows[0]["n_test"]
+    assert set(clf) == set(tally) and clf["1"]["n"] + clf["2"]["n"] == rows[0]["n_test"]
     for k, (samples, right) in tally.items():
-        assert clf[str(k)]["n"] == samples
-        assert clf[str(k)]["accuracy"] == pytest.approx(right / samples)
+        assert clf[k]["n"] == samples
+        assert clf[k]["accuracy"] == pytest.approx(right / samples)
     for k, cm in cms.items():
         assert seg[str(k)]["cm"] == cm.tolist() and seg[str(k)]["n"] == hand_k.count(k)
     text = write_report(rows, tmp_path / "r.md").read_text()
