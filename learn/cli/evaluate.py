@@ -65,7 +65,7 @@ def evaluate_command(
         for m in models:
             load_npz(m)
         jobs = eval_jobs([c for c in checkpoints if c.suffix != ".npz"], tta, ensemble, int8)
-        rows = [evaluate_job(j, data, hand_classes=hand, **timing) for j in jobs]
+        rows = [evaluate_job(j, data, hand_classes=hand, **timing, progress=progress) for j in jobs]
         rows += [evaluate_classical(m, data, hand_classes=hand, **timing) for m in models]
     except (HandskinError, KeyError) as err:
         raise fail(err) from err

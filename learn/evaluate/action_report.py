@@ -103,12 +103,13 @@ def frames_figure(rows: list[dict], labels: list[str]) -> Figure:
             acc = [100 * M.accuracy(cm) for cm in left["prefix_cm"]]
             ax.plot(r["frames"], acc, "s--", c=f"C{k}", alpha=0.6, label=f"{label}, left hands")
     r = rows[0]
-    ax.axhline(100 * r["chance"]["uniform"], c="0.5", ls=":", label="chance (1/8)")
+    chance = f"chance (1/{len(r['class_names'])})"
+    ax.axhline(100 * r["chance"]["uniform"], c="0.5", ls=":", label=chance)
     ax.axhline(100 * r["chance"]["majority"], c="0.3", ls="-.", label="commonest action")
     for name, end_s in zip(PHASES, r["phase_end_s"] or (), strict=False):
         x = end_s / r["frame_period_s"]
         ax.axvline(x, c="0.8", lw=1)
-        ax.text(x, 2, f"{name} ends", rotation=90, va="bottom", ha="right", size=8, c="0.4")
+        ax.text(x, 101, f"{name}\nends", va="bottom", ha="center", size=8, c="0.4")
     ax.set_xlabel(f"frames seen (one every {r['frame_period_s']:g} s)")
     ax.set_ylabel("accuracy on held-out people, %")
     ax.set_ylim(0, 100)

@@ -140,10 +140,11 @@ def evaluate_action(
     threads: int = 1,
     time_runs: int = 100,
     time_rounds: int = 3,
+    progress: bool = True,
 ) -> dict:
     """The report row of the action network ``model`` (from checkpoint ``ckpt`` at ``path``) on
     the test split of ``data_path``: see the module docstring."""
-    test = read_sequence_test(data_path, run)
+    test = read_sequence_test(data_path, run, progress)
     names = test.class_names
     pred = prefix_predictions(model, test.x, run.eval_batch_size)
     cms = prefix_confusions(pred, test.y, len(names))

@@ -101,6 +101,7 @@ def evaluate_job(
     threads: int = 1,
     time_runs: int = 100,
     time_rounds: int = 3,
+    progress: bool = True,
 ) -> dict:
     """Test-split metrics (eval mode and fast path) and CPU ms/image at batch 1 of a job's
     network: ``job.tta`` with test-time flips over the views each network was trained on;
@@ -109,14 +110,16 @@ def evaluate_job(
     Timing: each inference path's median of ``time_runs`` runs, the least over ``time_rounds``
     rounds in which the paths take turns (`learn.infer.fastpath.interleaved_cpu_ms`). On a
     dataset of several contacts per sample, eval mode's scores by number of contacts too
-    (`learn.evaluate.contacts`)."""
+    (`learn.evaluate.contacts`). ``progress``: a bar while sequences are read."""
     check_timing(time_runs, time_rounds, threads)
     if len(job.paths) == 1:
         ckpt = load_checkpoint(job.paths[0])
         model, run = model_from_checkpoint(ckpt, int8_ok=True, where=job.paths[0])
         if run.task == "action":  # sequences in, its own row (learn.evaluate.actions)
             timing = {"threads": threads, "time_runs": time_runs, "time_rounds": time_rounds}
-            return evaluate_action(job.paths[0], ckpt, model, run, Path(data_path), **timing)
+            return evaluate_action(
+                job.paths[0], ckpt, model, run, Path(data_path), **timing, progress=progress
+            )
         members = [Member(job.paths[0], ckpt, model, run)]
     else:
         members = load_members(job.paths)
