@@ -231,14 +231,16 @@ def evaluate_classical(
     threads: int = 1,
     time_runs: int = 100,
     time_rounds: int = 3,
+    progress: bool = True,
 ) -> dict:
     """Test-split scores and CPU ms/image of a classical model file; a row of
     ``learn.evaluate.report.write_report`` (the keys of ``evaluate_checkpoint``'s). Timed by
-    :func:`ms_per_image` over ``time_rounds`` rounds of ``time_runs`` runs."""
+    :func:`ms_per_image` over ``time_rounds`` rounds of ``time_runs`` runs; ``progress``: a bar
+    while the test images are read."""
     model = load_classical(path)
     meta = model.meta
     hand = hand_classes or meta["data"].get("hand_classes")
-    x, y, names = split_images(data, "test", meta["input_size"], hand, meta["seed"])
+    x, y, names = split_images(data, "test", meta["input_size"], hand, meta["seed"], progress)
     if list(names) != list(meta["class_names"]):
         raise DataError(
             f"{data} has classes {list(names)}; {path} was trained on "

@@ -66,7 +66,10 @@ def evaluate_command(
             load_npz(m)
         jobs = eval_jobs([c for c in checkpoints if c.suffix != ".npz"], tta, ensemble, int8)
         rows = [evaluate_job(j, data, hand_classes=hand, **timing, progress=progress) for j in jobs]
-        rows += [evaluate_classical(m, data, hand_classes=hand, **timing) for m in models]
+        rows += [
+            evaluate_classical(m, data, hand_classes=hand, **timing, progress=progress)
+            for m in models
+        ]
     except (HandskinError, KeyError) as err:
         raise fail(err) from err
     flags = [f for f, on in (("--tta", tta), ("--ensemble", ensemble), ("--int8", int8)) if on]

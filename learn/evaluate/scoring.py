@@ -133,7 +133,7 @@ def evaluate_job(
         return nets[0] if len(nets) == 1 else MeanSoftmax(nets)
 
     hand = hand_classes or (first.ckpt.get("data") or {}).get("hand_classes")
-    test = read_test_split(Path(data_path), run, hand)
+    test = read_test_split(Path(data_path), run, hand, progress)
     n_cls, size = run.model.num_classes, run.model.input_size
     contacts = split_contacts(Path(data_path), run.task, size, run.model.canvas_mm)
     keep = contacts is not None  # eval mode's predictions, scored by number of contacts
@@ -227,7 +227,7 @@ _TEST_SPLIT: dict = {}  # key, tensors of the last test split read
 
 
 def read_test_split(
-    data_path: Path, run: RunConfig, hand_classes: tuple[str, ...] | None
+    data_path: Path, run: RunConfig, hand_classes: tuple[str, ...] | None, progress: bool = True
 ) -> TensorData:
     """The test split of ``data_path`` in memory, as ``run`` reads it. The last one read is kept,
     so the rows of one ``handskin evaluate`` that share task, input size and canvas read it once;
@@ -242,7 +242,7 @@ def read_test_split(
     if _TEST_SPLIT.get("key") != key:
         _TEST_SPLIT.clear()  # free the last split before reading the next
         split = open_split(data_path, "test", run.task, size, hand_classes, run.train.seed, canvas)
-        _TEST_SPLIT.update(key=key, value=materialize(split, "test"))
+        _TEST_SPLIT.update(key=key, value=materialize(split, "test", progress))
     return _TEST_SPLIT["value"]
 
 
