@@ -1,7 +1,7 @@
 """The action networks' part of ``handskin evaluate``'s report: accuracy beside the chance
-levels, the accuracy against the frames seen, the mirror pairs by hand, the confusion matrix,
-and two PNGs beside the report (``<stem>_actions_confusion.png``,
-``<stem>_actions_frames.png``).
+levels, the accuracy against the frames seen, the mirror pairs by hand and how their prints
+move on the skin, the confusion matrix, and two PNGs beside the report
+(``<stem>_actions_confusion.png``, ``<stem>_actions_frames.png``).
 
     lines = action_section(rows, labels, Path("report.md"))   # rows of learn.evaluate.actions
 """
@@ -51,6 +51,26 @@ def mirror_table(r: dict) -> list[str]:
             cells = [f"{a} / {b}", hand, str(n), _pct(first_ok), _pct(first_mirror)]
             out.append("| " + " | ".join([*cells, _pct(ok), _pct(mirror)]) + " |")
     return out
+
+
+def cue_table(cues: dict[str, dict]) -> list[str]:
+    """How the mirror pairs' prints move on the skin (`learn.evaluate.actions.mirror_cues`)."""
+    out = [
+        "### What tells a mirror pair apart on the skin",
+        "",
+        "From the end of the load to the end of the hold, each test press's print moves "
+        "(`tactile.motion`): its centre of pressure shifts across the hand (the palm-to-fingers "
+        "axis of its label image, turned a quarter turn counter-clockwise on the map) and its "
+        "long axis turns (counter-clockwise positive). The skin reads pressure, not shear: this "
+        "is what a network can see of a push's side or a twist's sense.",
+        "",
+        "| action | presses | shift across the hand, mm: mean (SD) | turn, °: mean (SD) |",
+        "|---|---|---|---|",
+    ]
+    for name, c in cues.items():
+        (a, a_sd), (t, t_sd) = c["across_mm"], c["turn_deg"]
+        out.append(f"| {name} | {c['n']} | {a:+.1f} ({a_sd:.1f}) | {t:+.1f} ({t_sd:.1f}) |")
+    return [*out, ""]
 
 
 def frames_table(r: dict) -> list[str]:
@@ -171,8 +191,8 @@ def action_section(rows: list[dict], labels: list[str], path: Path) -> list[str]
     lines = [
         "## Actions from the 10 Hz sequence",
         "",
-        "| method | accuracy % | chance % (1/8) | commonest action % | CPU ms/sequence "
-        "| trained on |",
+        f"| method | accuracy % | chance % (1/{len(mine[0][0]['class_names'])}) "
+        "| commonest action % | CPU ms/sequence | trained on |",
         "|---|---|---|---|---|---|",
     ]
     for r, lab in mine:
@@ -183,6 +203,8 @@ def action_section(rows: list[dict], labels: list[str], path: Path) -> list[str]
         cells.append(data + ("" if n_train is None else f" ({n_train:,} presses)"))
         lines.append("| " + " | ".join(cells) + " |")
     lines += ["", f"![accuracy against frames seen]({frames_png.name})", ""]
+    if mine[0][0].get("mirror_cues"):  # a property of the test data, shared by the rows
+        lines += cue_table(mine[0][0]["mirror_cues"])
     for k, (r, lab) in enumerate(mine):
         suffix = "" if len(mine) == 1 else f"_{k + 1}"
         png = path.with_name(f"{path.stem}_actions_confusion{suffix}.png")

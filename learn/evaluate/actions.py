@@ -1,7 +1,8 @@
 """An action network scored on the held-out people of a dataset with sequences: the confusion
 matrix over the actions, the chance levels, the accuracy against the number of 10 Hz frames
-seen, by hand (right, left), and CPU ms per sequence — the row of ``handskin evaluate`` for an
-``action_tcn`` or ``action_3d`` checkpoint.
+seen, by hand (right, left), how the prints of mirror pairs move (`mirror_cues`), and CPU ms
+per sequence — the row of ``handskin evaluate`` for an ``action_tcn`` or ``action_3d``
+checkpoint.
 
     row = evaluate_action(Path("runs/action/best.pt"), ckpt, model, run, Path("data/actions"))
 
@@ -24,10 +25,12 @@ from torch import nn
 from learn import metrics as M
 from learn.config import RunConfig
 from learn.data.load import materialize
-from learn.data.sequences import FRAME_PERIOD_S, SequenceDataset, hand_sides
+from learn.data.sequences import FRAME_PERIOD_S, SequenceDataset, frame_times_s, hand_sides
 from learn.inputs import mirror_classes
 from learn.numerics import flushing
 from learn.train.validation import logits_of
+from tactile.dataset.reader import DatasetReader
+from tactile.motion import hand_axis, print_motion
 
 HANDS = ("right", "left")
 
@@ -42,6 +45,7 @@ class SequenceTest:
     hands: np.ndarray
     phase_s: np.ndarray | None
     class_names: tuple[str, ...]
+    indices: np.ndarray  # (S,) the presses' rows in the dataset
 
 
 def read_sequence_test(data_path: Path, run: RunConfig, progress: bool = True) -> SequenceTest:
@@ -51,7 +55,44 @@ def read_sequence_test(data_path: Path, run: RunConfig, progress: bool = True) -
     with ds.reader as r:
         hands = hand_sides(r, ds.indices)
         phase = r.seq_phase_s[:][ds.indices] if "seq_phase_s" in r.fields else None
-    return SequenceTest(data.x, data.y, hands, phase, ds.class_names)
+    return SequenceTest(data.x, data.y, hands, phase, ds.class_names, ds.indices)
+
+
+def _frame_at(t_s: float, n: int) -> int:
+    """The last of a press's ``n`` frames read by ``t_s`` s (frame k at 0.1 (k + 1) s)."""
+    return int(np.clip(round(t_s / FRAME_PERIOD_S) - 1, 0, n - 1))
+
+
+def mirror_cues(data_path: Path, test: SequenceTest) -> dict[str, dict] | None:
+    """Per action of a mirror pair, how its test presses' prints move from the end of the load
+    to the end of the hold (`tactile.motion.print_motion`, in the hand's axes from each press's
+    label image): presses, and mean and SD of ``across_mm`` and ``turn_deg``. None without
+    mirror pairs, label images or phase times."""
+    names, pairs = test.class_names, mirror_pairs(test.class_names)
+    wanted = sorted({a for pair in pairs for a in pair})
+    with DatasetReader(data_path) as r:
+        if not pairs or test.phase_s is None or "label_image" not in r.fields:
+            return None
+        motions: dict[int, list] = {a: [] for a in wanted}
+        for j, i in enumerate(test.indices.tolist()):
+            a = int(test.y[j])
+            axis = hand_axis(r.map, r.label_image[i]) if a in motions else None
+            if axis is None:
+                continue
+            n = int(r.seq_length[i])
+            k = [_frame_at(test.phase_s[j, phase], n) for phase in (1, 2)]  # load, hold ends
+            p = r.pressure_from_raw(r.seq_raw[i][k], frame_times_s(n)[k])
+            if (p.sum(1) > 0).all():
+                motions[a].append(print_motion(p[0], p[1], r.map.uv, axis))
+    out = {}
+    for a, m in motions.items():
+        m = np.asarray(m, float).reshape(-1, 2)
+        stats = [
+            [float(f(m[:, c])) if len(m) else float("nan") for f in (np.mean, np.std)]
+            for c in (0, 1)
+        ]
+        out[names[a]] = {"n": len(m), "across_mm": stats[0], "turn_deg": stats[1]}
+    return out
 
 
 def prefix(x: torch.Tensor, k: int) -> torch.Tensor:
@@ -169,6 +210,7 @@ def evaluate_action(
         "prefix_cm": cms.tolist(),
         "hands": by_hand(pred, test),
         "mirror_pairs": [[names[i], names[j]] for i, j in mirror_pairs(names)],
+        "mirror_cues": mirror_cues(data_path, test),
         "phase_end_s": phase,
         "ms_per_sequence": ms,
         "threads": threads,

@@ -19,6 +19,7 @@ from learn.data.load import load_data
 from learn.train.loop import fit
 from tactile import TactileMap
 from tactile.dataset import DatasetWriter
+from tactile.labels import label_image
 from tactile.synthetic import cylinder_sector_layout
 
 N_HAND, N_OTHER = 24, 24  # samples; 6 subjects and 6 object instances
@@ -213,15 +214,28 @@ SEQ_MOTION = {
 }
 
 
-def press_frame(flat_mm: np.ndarray, action: str, k: int, rng_offset: np.ndarray) -> np.ndarray:
-    """(N,) Pa of frame k of a press: a 14 x 30 mm bar (a 6 mm disc for "free") moved and
+def press_axes(flat_mm: np.ndarray, action: str, k: int, rng_offset: np.ndarray):
+    """(s, z) mm of every taxel in the axes of frame k's bar (z its long axis), moved and
     turned by ``SEQ_MOTION`` each frame from its start ``rng_offset`` (mm)."""
     ds, dz, turn = SEQ_MOTION[action]
     angle = np.deg2rad(30 + turn * k)
     rot = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
-    s, z = ((flat_mm - rng_offset - [ds * k, dz * k]) @ rot).T
+    return ((flat_mm - rng_offset - [ds * k, dz * k]) @ rot).T
+
+
+def press_frame(flat_mm: np.ndarray, action: str, k: int, rng_offset: np.ndarray) -> np.ndarray:
+    """(N,) Pa of frame k of a press: a 14 x 30 mm bar (a 6 mm disc for "free"), `press_axes`."""
+    s, z = press_axes(flat_mm, action, k, rng_offset)
     inside = np.hypot(s, z) < 6 if action == "free" else (np.abs(s) < 7) & (np.abs(z) < 15)
     return np.where(inside, 500.0 + 40.0 * k, 0.0)
+
+
+def press_labels(flat_mm: np.ndarray, action: str, k: int, rng_offset: np.ndarray) -> np.ndarray:
+    """(N,) class ids of frame k's pressed taxels: the bar's half at z < 0 the palm, the other
+    half the index finger (the hand's axis: +z)."""
+    pressed = press_frame(flat_mm, action, k, rng_offset) > 0
+    z = press_axes(flat_mm, action, k, rng_offset)[1]
+    return np.where(pressed, np.where(z < 0, 6, 2), 0).astype(np.uint8)
 
 
 def sequence_sample(i: int, tmap: TactileMap, flat_mm: np.ndarray) -> dict:
@@ -238,10 +252,12 @@ def sequence_sample(i: int, tmap: TactileMap, flat_mm: np.ndarray) -> dict:
     raw[:n] = np.round(SEQ_BASELINE + SEQ_DRIFT * t_s[:n, None] + GAIN * p)
     side = ("right_hand", "left_hand")[(i // 4) % 2]
     contactor = {"kind": "hand", "type": side} if hand else {"kind": "object", "type": "ball"}
+    labels = press_labels(flat_mm, action, n - 1, start) if hand else np.zeros(len(p[-1]), int)
     return {
         "raw": raw[n - 1],
         "pressure_pa": p[-1].astype(np.float32),
         "image": tmap.image(p[-1]),
+        "label_image": label_image(tmap, p[-1], labels),
         "is_hand": np.uint8(hand),
         "action": np.int8(ACTIONS.index(action) if hand else -1),
         "subject_id": np.int32(i // 4 if hand else -1),

@@ -1,5 +1,6 @@
 """The action networks' evaluation: answers after k frames from those frames alone (a hand-computed
-case), the chance levels, and `handskin train` / `handskin evaluate` on a tiny sequence set."""
+case), the chance levels, the mirror pairs' motion against the tiny set's own, and `handskin
+train` / `handskin evaluate` on a tiny sequence set."""
 
 from __future__ import annotations
 
@@ -17,14 +18,19 @@ from learn.config import ModelConfig, RunConfig, TrainConfig
 from learn.data.load import load_data
 from learn.evaluate.actions import (
     chance_levels,
+    mirror_cues,
     mirror_pairs,
     prefix,
     prefix_confusions,
     prefix_predictions,
+    read_sequence_test,
 )
 from learn.infer.predict import load_predictor
 from learn.train.loop import fit
+from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError
+from tactile.motion import principal_angle
+from tactile.synthetic import cylinder_sector_layout
 
 runner = CliRunner()
 
@@ -108,3 +114,30 @@ def test_image_commands_refuse_an_action_network(app, tiny_sequences, tmp_path):
     assert res.exit_code == 2 and "action network" in res.output
     with pytest.raises(ConfigError, match="action network"):
         load_predictor(tmp_path / "r" / "best.pt")
+
+
+def test_mirror_cues_measure_the_presses_own_motion(tiny_sequences):
+    """Each tiny press moves a bar by ``SEQ_MOTION`` per frame; from the end of the load (frame 1)
+    to the end of the hold (frame 3): a push left or right shifts it 2 x 3 mm x cos 30 deg
+    across its axis, opposite ways, and a twist turns it opposite ways by as much as the same
+    frames turn on the set's own flat coordinates (2 x 8 deg, as a 5 mm pitch samples it). A
+    mirror image of the map flips both signs, so only their relation is fixed: in the bar's axes
+    a push left moves against the sense a counter-clockwise twist turns."""
+    run = RunConfig(ModelConfig("action_tcn", 8, width=0.25, input_size=(32, 48)), TrainConfig())
+    test = read_sequence_test(tiny_sequences, run, progress=False)
+    cues = mirror_cues(tiny_sequences, test)
+    assert set(cues) == {"grasp_twist_cw", "grasp_twist_ccw", "push_left", "push_right"}
+    assert all(c["n"] == 1 for c in cues.values())  # one press of each in the test split
+    left, right = cues["push_left"]["across_mm"][0], cues["push_right"]["across_mm"][0]
+    cw, ccw = cues["grasp_twist_cw"]["turn_deg"][0], cues["grasp_twist_ccw"]["turn_deg"][0]
+    assert abs(left) == pytest.approx(6 * np.cos(np.pi / 6), abs=1.5) and left * right < 0
+    assert cw * ccw < 0 and left * ccw < 0
+    # the turns against the same frames' pressures on the set's own flat coordinates (a 14 mm
+    # bar sampled at a 5 mm pitch turns by 5-24 deg where the bar turns 16)
+    _, flat_mm = cylinder_sector_layout(width_mm=60, length_mm=90, pitch_mm=5)
+    with DatasetReader(tiny_sequences) as r:
+        rows = {test.class_names[int(y)]: int(i) for y, i in zip(test.y, test.indices, strict=True)}
+        for name in ("grasp_twist_cw", "grasp_twist_ccw"):
+            p = r.pressure_from_raw(r.seq_raw[rows[name]][[1, 3]], np.array([0.2, 0.4]))
+            turn = np.degrees(principal_angle(p[1], flat_mm) - principal_angle(p[0], flat_mm))
+            assert abs(cues[name]["turn_deg"][0]) == pytest.approx(abs(turn), abs=1.5)
