@@ -24,8 +24,7 @@ TASK_OF_ARCH = {
     "vgg16": "classify",
     "segnet": "segment",
     "fcn16s": "segment",
-    "action_tcn": "action",  # the action of a press from its sequence (learn.models.action)
-    "action_3d": "action",
+    "action_3d": "action",  # the action of a press from its sequence (learn.models.action)
 }
 OPTIMIZERS = ("sgdm", "adam", "adamw")
 LOSSES = ("ce", "weighted_ce", "dice", "generalized_dice", "ce_dice")
@@ -59,7 +58,7 @@ def _require(ok: bool, message: str) -> None:
 class ModelConfig:
     """Which network to build (``learn.models.create_model``) and its size."""
 
-    # handsnet, vgg16 (classifiers), segnet, fcn16s (segmenters), action_tcn, action_3d (actions)
+    # handsnet, vgg16 (classifiers), segnet, fcn16s (segmenters), action_3d (actions)
     arch: str = "handsnet"
     num_classes: int = 2  # 2 = hand / non-hand; 7 = background + 5 fingers + palm; 8 actions
     in_channels: int = 1  # tactile images are grey
@@ -272,14 +271,13 @@ SEGNET_GPU = RunConfig(
 #: Dice best for FCN; here Dice sat at background-only for its first epochs (docs/findings.md).
 FCN16S = dataclasses.replace(SEGNET, model=ModelConfig("fcn16s", 7, width=0.25))
 
-#: The action networks (*ours*): 8 actions, frames at 34 x 50 px (HandsNet's pareto point),
+#: The action network (*ours*): 8 actions, frames at 34 x 50 px (HandsNet's pareto point),
 #: Adam at 1e-3, batch 32 sequences, 30 epochs with x 0.2 after 20 (docs/learning.md, Actions).
-ACTION_TCN = RunConfig(
-    ModelConfig("action_tcn", 8, width=0.5, input_size=(34, 50)),
+ACTION_3D = RunConfig(
+    ModelConfig("action_3d", 8, input_size=(34, 50)),
     TrainConfig(optimizer="adam", lr=0.001, lr_drop_period_epochs=20, batch_size=32, epochs=30),
     eval_batch_size=32,
 )
-ACTION_3D = dataclasses.replace(ACTION_TCN, model=ModelConfig("action_3d", 8, input_size=(34, 50)))
 
 #: the preset of each network (``handskin train --arch``'s default configuration)
 PRESET_OF_ARCH = {
@@ -287,7 +285,6 @@ PRESET_OF_ARCH = {
     "vgg16": VGG16_FINETUNE,
     "segnet": SEGNET,
     "fcn16s": FCN16S,
-    "action_tcn": ACTION_TCN,
     "action_3d": ACTION_3D,
 }
 

@@ -62,7 +62,7 @@ def train_command(
     data: DataArg,
     out: opt(Path, "Run folder: best.pt, last.pt, curves.png, run.toml, test_metrics.json."),
     arch: opt(
-        str, "handsnet | vgg16 | segnet | fcn16s | action_tcn | action_3d, or bovw | vgg_svm."
+        str, "handsnet | vgg16 | segnet | fcn16s | action_3d, or bovw | vgg_svm."
     ) = "handsnet",
     config: opt(
         Path | None, "TOML run config laid over the arch's preset (docs/learning.md)."

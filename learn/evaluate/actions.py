@@ -1,8 +1,7 @@
 """An action network scored on the held-out people of a dataset with sequences: the confusion
 matrix over the actions, the chance levels, the accuracy against the number of 10 Hz frames
 seen, by hand (right, left), how the prints of mirror pairs move (`mirror_cues`), and CPU ms
-per sequence — the row of ``handskin evaluate`` for an ``action_tcn`` or ``action_3d``
-checkpoint.
+per sequence — the row of ``handskin evaluate`` for an ``action_3d`` checkpoint.
 
     row = evaluate_action(Path("runs/action/best.pt"), ckpt, model, run, Path("data/actions"))
 

@@ -31,7 +31,6 @@ ARCH_LABEL = {
     "vgg_svm": "VGG16 + SVM",
     "bovw": "BoVW",
     "ensemble": "Ensemble",
-    "action_tcn": "frame CNN + temporal conv",
     "action_3d": "3D CNN",
 }
 #: The paper's Table 3 (hand / non-hand, % accuracy; ms per image). None: not known to us.

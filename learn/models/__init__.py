@@ -15,7 +15,7 @@ import torch
 from torch import nn
 
 import learn.numerics  # noqa: F401 (torch's worker threads start flushing subnormals)
-from learn.models.action import Action3D, ActionTCN
+from learn.models.action import Action3D
 from learn.models.blocks import fold_batch_norm
 from learn.models.fcn import FCN16s
 from learn.models.handsnet import HandsNet
@@ -28,7 +28,6 @@ MODELS: dict[str, Callable[..., nn.Module]] = {
     "vgg16": VGGClassifier,
     "segnet": SegNet,
     "fcn16s": FCN16s,
-    "action_tcn": ActionTCN,
     "action_3d": Action3D,
 }
 
@@ -63,7 +62,6 @@ def prepare_for_inference(model: nn.Module) -> nn.Module:
 __all__ = [
     "MODELS",
     "Action3D",
-    "ActionTCN",
     "FCN16s",
     "HandsNet",
     "SegNet",

@@ -80,7 +80,7 @@ def test_train_and_evaluate_an_action_network(app, tiny_sequences, tmp_path):
         "[train]\nepochs = 2\nbatch_size = 8\n"
     )
     out, md = tmp_path / "run", tmp_path / "report.md"
-    args = ["train", str(tiny_sequences), "--arch", "action_tcn", "--out", str(out)]
+    args = ["train", str(tiny_sequences), "--arch", "action_3d", "--out", str(out)]
     res = runner.invoke(app, [*args, "--config", str(config), "--no-progress"])
     assert res.exit_code == 0, res.output
     assert json.loads((out / "test_metrics.json").read_text())["data"]["n_test"] == 8
@@ -123,7 +123,7 @@ def test_mirror_cues_measure_the_presses_own_motion(tiny_sequences):
     frames turn on the set's own flat coordinates (2 x 8 deg, as a 5 mm pitch samples it). A
     mirror image of the map flips both signs, so only their relation is fixed: in the bar's axes
     a push left moves against the sense a counter-clockwise twist turns."""
-    run = RunConfig(ModelConfig("action_tcn", 8, width=0.25, input_size=(32, 48)), TrainConfig())
+    run = RunConfig(ModelConfig("action_3d", 8, width=0.25, input_size=(32, 48)), TrainConfig())
     test = read_sequence_test(tiny_sequences, run, progress=False)
     cues = mirror_cues(tiny_sequences, test)
     assert set(cues) == {"grasp_twist_cw", "grasp_twist_ccw", "push_left", "push_right"}

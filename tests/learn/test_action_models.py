@@ -1,6 +1,5 @@
-"""The model tester of the action networks (sequences in): forward and backward on a tiny input,
-channel and class variants, overfitting one batch; the training-time prefix cut against numpy;
-the causal temporal convolution."""
+"""The model tester of the action network (sequences in): forward and backward on a tiny input,
+channel and class variants, overfitting one batch; the training-time prefix cut against numpy."""
 
 from __future__ import annotations
 
@@ -10,7 +9,7 @@ import torch
 from torch import nn
 
 from learn.models import MODELS, create_model
-from learn.models.action import CausalConv1d, RandomPrefix
+from learn.models.action import RandomPrefix
 from tactile.errors import ConfigError
 
 ARCHS = sorted(a for a, m in MODELS.items() if m.task == "sequence")
@@ -20,8 +19,8 @@ def make(arch: str, num_classes: int, in_channels: int = 1, **kw) -> nn.Module:
     return create_model(arch, num_classes=num_classes, in_channels=in_channels, width=0.25, **kw)
 
 
-def test_both_action_networks_are_registered():
-    assert ARCHS == ["action_3d", "action_tcn"]
+def test_the_action_network_is_registered():
+    assert ARCHS == ["action_3d"]
 
 
 @pytest.mark.parametrize("shape", [(3, 24, 30), (7, 29, 37)])
@@ -98,14 +97,3 @@ def test_random_prefix_keeps_a_prefix_of_each_press():
         kept.append(k)
     assert {k for k, n in zip(kept, lengths, strict=True) if n == 8} == set(range(1, 9))
     assert torch.equal(cut.eval()(x), x) and torch.equal(RandomPrefix(0.0).train()(x), x)
-
-
-def test_causal_convolution_sees_no_later_frame():
-    torch.manual_seed(0)
-    conv = CausalConv1d(3, 4, 3, dilation=2)
-    x = torch.rand(2, 3, 10)
-    later = x.clone()
-    later[..., 6:] = torch.rand(2, 3, 4)
-    torch.testing.assert_close(conv(x)[..., :6], conv(later)[..., :6])
-    assert conv(x).shape == (2, 4, 10)
-    assert not torch.allclose(conv(x)[..., 6:], conv(later)[..., 6:])

@@ -73,7 +73,7 @@ def test_hand_sides_from_the_contactor(tiny_sequences):
 
 def test_load_data_of_an_action_run(tiny_sequences):
     run = RunConfig(
-        ModelConfig("action_tcn", 8, width=0.25, input_size=SIZE),
+        ModelConfig("action_3d", 8, width=0.25, input_size=SIZE),
         TrainConfig(seed=0),
         val_fraction=0.2,
     )
