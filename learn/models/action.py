@@ -6,7 +6,8 @@ press — and returns ``(B, num_classes)`` logits; its ``task`` is ``"sequence"`
 over (T, h, w) (16-128 channels times ``width``), the maximum over time and space. In training
 it cuts each sequence after a random number of frames (`RandomPrefix`), so that it answers from
 the first frames of a press as well as from all of it. (A per-frame CNN with a temporal
-convolution scored lower: docs/findings.md, "Actions: a 3D CNN over a temporal convolution".)
+convolution scored lower: docs/findings.md, "Actions: a temporal convolution over per-frame
+features".)
 """
 
 from __future__ import annotations
