@@ -141,5 +141,6 @@ def net_inputs(
     """Network inputs (B, 1, h, w) float32 in [0, 1] of ``task``'s networks from images
     (B, H, W) uint8, made as training makes them (``learn.inputs.net_input``; ``canvas``:
     (H', W') map pixels of the model's input canvas, or None)."""
-    x = images_u8.astype(np.float32) / np.float32(255.0)
-    return net_input(x, tuple(size), task, canvas)[:, None] if len(x) else x[:, None, :0, :0]
+    if not len(images_u8):
+        return np.zeros((0, 1, 0, 0), np.float32)
+    return net_input(np.asarray(images_u8, np.uint8), tuple(size), task, canvas)[:, None]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tactile.resize import canvas_px, fit_canvas, resize_image, resize_labels
+from tactile.resize import canvas_px, fit_canvas, resize_grey, resize_labels
 
 #: The rule of `net_input`, stored in every checkpoint (``learn.train.checkpoint``): segmentation
 #: inputs on their labels' support since this name; a segmenter without it was trained on
@@ -66,17 +66,18 @@ def flip_view(x, view: int):
 
 
 def net_input(
-    image01: np.ndarray, size: tuple[int, int], task: str, canvas: tuple[int, int] | None = None
+    grey: np.ndarray, size: tuple[int, int], task: str, canvas: tuple[int, int] | None = None
 ) -> np.ndarray:
-    """Network input of image(s) (H, W) or (B, H, W) float scaled to [0, 1]: the anti-aliased
-    resize to ``size`` (h, w) px; for ``task == "segment"`` kept on the support its nearest-
-    neighbour labels have (`tactile.resize.resize_image` ``keep_support``), so that zero input
-    is background in the labels too. ``canvas`` (H', W') map pixels (`input_canvas`): centred
-    on it first (`tactile.resize.fit_canvas`). Same shape as ``image01`` with (h, w) last,
-    same dtype."""
+    """Network input of tactile image(s) (H, W) or (B, H, W) uint8 grey levels: the
+    anti-aliased resize to ``size`` (h, w) px, scaled to [0, 1] float32
+    (`tactile.resize.resize_grey`: the same bytes on any CPU and on the frame path); for
+    ``task == "segment"`` kept on the support its nearest-neighbour labels have
+    (``keep_support``), so that zero input is background in the labels too. ``canvas`` (H', W')
+    map pixels (`input_canvas`): centred on it first (`tactile.resize.fit_canvas`). Same shape
+    as ``grey`` with (h, w) last."""
     if canvas is not None:
-        image01 = fit_canvas(image01, canvas)
-    return resize_image(image01, size, keep_support=task == "segment")
+        grey = fit_canvas(grey, canvas)
+    return resize_grey(grey, size, keep_support=task == "segment")
 
 
 def net_labels(

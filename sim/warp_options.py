@@ -60,8 +60,8 @@ def check_warp(opts: WarpOptions) -> None:
     if installed != mujoco.__version__:
         raise ConfigError(
             f"--backend warp: mujoco-warp {installed} does not match mujoco {mujoco.__version__} "
-            f"(their model layouts must agree). Fix: pip install "
-            f"'mujoco-warp=={mujoco.__version__}'"
+            f"(their model layouts must agree). Fix: pip install 'handskin[warp]' (it pins a "
+            f"pair), or pip install 'mujoco=={installed}' 'mujoco-warp=={installed}'"
         )
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING

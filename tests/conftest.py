@@ -67,3 +67,46 @@ def group_sides(subject_id, instance_id, train_index) -> dict:
 def keyed_reference():
     """(keyed_reference_sides, group_sides): the keyed split's rule and a dataset's sides."""
     return keyed_reference_sides, group_sides
+
+
+#: Score margin within which two runs of one network may decide differently. A batch of another
+#: size or layout, or another CPU, runs other kernels (oneDNN and BLAS choose by instruction set
+#: and shape), whose float32 sums come in another order: the tests' small networks then give
+#: logits and probabilities about 1e-6 apart, so only decisions whose two best scores lie closer
+#: than this can differ. Exactly equal inputs are the job of `tactile.resize.resize_grey`.
+NEAR_TIE = 1e-4
+
+
+class NearTies:
+    """Comparisons of decisions made by one network run two ways, exact but at near ties."""
+
+    margin = NEAR_TIE
+
+    @staticmethod
+    def count(scores) -> int:
+        """Decisions along axis 1 of ``scores`` (B, C, ...) (logits or probabilities) whose two
+        best scores lie within `NEAR_TIE`."""
+        import torch
+
+        top = torch.as_tensor(np.asarray(scores, np.float64)).topk(2, dim=1).values
+        return int(((top[:, 0] - top[:, 1]) < NEAR_TIE).sum())
+
+    @classmethod
+    def assert_cm(cls, got, want, scores) -> None:
+        """Confusion matrices equal but for the near ties of the reference's ``scores``: each
+        decision made the other way moves one count from one cell to another."""
+        diff = np.abs(np.asarray(got) - np.asarray(want)).sum()
+        assert np.asarray(got).sum() == np.asarray(want).sum()
+        assert diff <= 2 * cls.count(scores), (diff, cls.count(scores), got, want)
+
+    @classmethod
+    def assert_rate(cls, got: float, want: float, scores) -> None:
+        """A share of right decisions (accuracy) equal but for the near ties of ``scores``."""
+        n = len(scores)
+        assert abs(got - want) <= cls.count(scores) / n + 1e-12, (got, want, cls.count(scores))
+
+
+@pytest.fixture(scope="session")
+def near_ties() -> type[NearTies]:
+    """`NearTies`: decisions compared exactly but at near ties (`NEAR_TIE`)."""
+    return NearTies

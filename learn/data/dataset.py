@@ -175,9 +175,10 @@ class TorchTactileDataset(Dataset):
         base, view = divmod(j, len(PAPER_VIEWS)) if self.flips else (j, 0)
         i = int(self.indices[base])
         image, labels = self.image_and_labels(i)
-        x = image.astype(np.float32) / np.float32(255.0)
         if self.size is not None:
-            x = net_input(x, self.size, self.task, self.canvas)
+            x = net_input(image, self.size, self.task, self.canvas)
+        else:
+            x = image.astype(np.float32) / np.float32(255.0)
         x = torch.from_numpy(np.ascontiguousarray(flip_view(x, PAPER_VIEWS[view])))[None]
         if self.task == "classify":
             return x, torch.tensor(int(self.reader.is_hand[i]), dtype=torch.int64)

@@ -135,7 +135,7 @@ class FolderDataset(Dataset):
     def __getitem__(self, j: int) -> tuple[torch.Tensor, torch.Tensor]:
         base, view = divmod(j, len(PAPER_VIEWS)) if self.flips else (j, 0)
         i = int(self.indices[base])
-        x = net_input(read_grey(self.files[i]).astype(np.float32) / 255.0, self.size, self.task)
+        x = net_input(read_grey(self.files[i]), self.size, self.task)
         x = torch.from_numpy(flip_view(x, PAPER_VIEWS[view]).copy())[None]
         if self.task == "classify":
             return x, torch.tensor(int(self.targets[i]), dtype=torch.int64)

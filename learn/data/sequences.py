@@ -110,9 +110,10 @@ class SequenceDataset(Dataset):
         """(T, h, w) float32 in [0, 1]: sample ``i``'s network inputs, zeros after its press."""
         n = min(int(self.reader.seq_length[i]), self.frames)
         images = frame_images(self.reader, self.reader.seq_raw[i][: max(n, 1)])
-        x = images.astype(np.float32) / np.float32(255.0)
         if self.size is not None:
-            x = net_input(x, self.size, "classify", self.canvas)
+            x = net_input(images, self.size, "classify", self.canvas)
+        else:
+            x = images.astype(np.float32) / np.float32(255.0)
         out = np.zeros((self.frames, *x.shape[1:]), np.float32)
         out[:n] = x[:n]
         return out

@@ -8,11 +8,11 @@ the network's labels back to the taxels without the full-size label image.
     x = ops.resize(image, box, out)    # (h, w) float32 = learn.inputs.net_input(image / 255, ...)
     labels = TaxelVotes.build(tmap, ops).labels(net_labels, image)   # = tactile.labels.backproject
 
-Each operator is the reference's own function applied once to basis or index images
-(`tactile.resize`, `learn.inputs`, `tactile.labels`), so it computes the same thing: the
-anti-aliased resize (Gaussian pre-filter and bilinear zoom, both linear and separable) as two
-float64 matrices ``rows @ image @ cols.T`` with the canvas folded in, the nearest-neighbour
-resizes as index arrays, the back-projection as a vote over each taxel's 2-pixel neighbourhood.
+Each operator is the reference's own (`tactile.resize`, `learn.inputs`, `tactile.labels`), so
+it computes the same bytes: the anti-aliased resize as the exact float64 operators of
+`tactile.resize.resize_grey` (``rows @ grey @ cols.T / 255``, whose sums are exact in any
+order) with the canvas folded in, the nearest-neighbour resizes as index arrays, the
+back-projection as a vote over each taxel's 2-pixel neighbourhood.
 Only the box of the map a frame presses is touched: the look-up table's rows, the erosion and
 dilation (exact there: the box keeps a margin wider than both disks) and the resize's columns.
 """
@@ -28,7 +28,7 @@ from learn.inputs import labels_on_map
 from tactile.labels import N_CLASSES, neighbourhood_matrix
 from tactile.morphology import erode_dilate
 from tactile.raster import grey_levels
-from tactile.resize import fit_canvas, resize_image, resize_labels
+from tactile.resize import fit_canvas, resize_labels, resize_operator
 from tactile.tactile_map import TactileMap
 
 Box = tuple[int, int, int, int]  # rows r0:r1, columns c0:c1 of the map grid, pixels
@@ -83,9 +83,10 @@ class ImageOps:
 
 
 def _axis_operator(n_in: int, n_canvas: int | None, n_out: int) -> np.ndarray:
-    """(n_out, n_in) float64: the canvas fit then the anti-aliased resize along one axis."""
+    """(n_out, n_in) float64: the canvas fit then the anti-aliased resize along one axis, the
+    weights those of `tactile.resize.resize_operator` (a fit selects one of them or none)."""
     fit = np.eye(n_in) if n_canvas is None else fit_canvas(np.eye(n_in), (n_canvas, n_in))
-    return resize_image(np.eye(fit.shape[0]), (n_out, fit.shape[0])) @ fit
+    return resize_operator(fit.shape[0], n_out) @ fit
 
 
 def _reached(op: np.ndarray) -> np.ndarray:
@@ -138,8 +139,8 @@ class InputOps:
         )
 
     def resize(self, image: np.ndarray, box: Box | None, out: np.ndarray) -> np.ndarray:
-        """``out`` (h, w) float32 := the anti-aliased resize of ``image / 255`` (H, W) uint8,
-        zero outside ``box``, as `learn.inputs.net_input` of a classifier computes it."""
+        """``out`` (h, w) float32 := the anti-aliased resize of ``image`` (H, W) uint8, / 255,
+        zero outside ``box``: `learn.inputs.net_input` of a classifier, byte for byte."""
         out[:] = 0
         if box is None:
             return out
@@ -148,9 +149,9 @@ class InputOps:
         q0, q1 = self.col_reach[c0:c1, 0].min(), self.col_reach[c0:c1, 1].max()
         if o1 <= o0 or q1 <= q0:
             return out  # the touch is off the canvas
-        x01 = (image[r0:r1, c0:c1].astype(np.float32) / np.float32(255.0)).astype(np.float64)
-        part = self.rows[o0:o1, r0:r1] @ torch.from_numpy(x01) @ self.cols[q0:q1, c0:c1].T
-        out[o0:o1, q0:q1] = part.numpy()
+        grey = torch.from_numpy(image[r0:r1, c0:c1].astype(np.float64))
+        part = self.rows[o0:o1, r0:r1] @ grey @ self.cols[q0:q1, c0:c1].T
+        out[o0:o1, q0:q1] = (part / 255.0).numpy()
         return out
 
     def keep_support(

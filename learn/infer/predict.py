@@ -56,9 +56,7 @@ class Predictor:
     def logits(self, image: np.ndarray, step_mm: float = 1.0) -> torch.Tensor:
         """Logits of one (H, W) uint8 image on a map grid of ``step_mm`` mm per pixel (used
         only with a canvas), made into the network input: (C,) or (C, h, w)."""
-        x = net_input(
-            np.asarray(image, np.float32) / 255.0, self.input_size, self.task, self.canvas(step_mm)
-        )
+        x = net_input(np.asarray(image, np.uint8), self.input_size, self.task, self.canvas(step_mm))
         with torch.inference_mode(), flushing():
             return self.model(torch.from_numpy(x)[None, None])[0].float()
 

@@ -81,18 +81,18 @@ def test_report_folder_has_tables_and_a_chart(run):
     assert img.std() > 0.05 and len(colours) > 20
 
 
-def test_every_accuracy_equals_a_per_image_reevaluation(run):
+def test_every_accuracy_equals_a_per_image_reevaluation(run, near_ties):
     import torch
 
+    from learn.inputs import net_input
     from learn.train.checkpoint import LAST, load_checkpoint, model_from_checkpoint
     from tactile.dataset.reader import open_dataset
-    from tactile.resize import resize_image
 
     out, results = run
     test_dir = results["test_set"]["dataset"]
     with open_dataset(test_dir) as ds:
         test = ds.splits["test"]
-        images = [resize_image(ds.image[i].astype(np.float32) / 255, PLAN.image_px) for i in test]
+        images = [net_input(ds.image[i], PLAN.image_px, "classify") for i in test]
         truth = ds.is_hand[:][test].astype(np.int64)
     assert len(test) == results["test_set"]["n_test"] and 0 < truth.sum() < len(truth)
     for row in results["settings"]:
@@ -100,8 +100,9 @@ def test_every_accuracy_equals_a_per_image_reevaluation(run):
         (ckpt,) = (out / "models").glob(f"handsnet-{folder}-*/{LAST}")
         model = model_from_checkpoint(load_checkpoint(ckpt))[0]
         with torch.no_grad():
-            pred = [int(model(torch.from_numpy(x)[None, None]).argmax()) for x in images]
-        assert row["accuracy_pct"] == pytest.approx(100 * np.mean(np.array(pred) == truth))
+            logits = torch.cat([model(torch.from_numpy(x)[None, None]) for x in images])
+        right = np.mean(logits.argmax(1).numpy() == truth)
+        near_ties.assert_rate(row["accuracy_pct"] / 100, right, logits)
 
 
 def test_each_dataset_was_made_with_its_setting(run):
@@ -271,12 +272,13 @@ def test_a_dataset_without_recorded_speed_is_reused_as_unknown(run, tmp_path):
     assert again["choice"]["name"] != "cheapest"
 
 
-def test_segnet_option_reports_a_mean_iou_that_pixel_counts_reproduce(run, tmp_path):
+def test_segnet_option_reports_a_mean_iou_that_pixel_counts_reproduce(run, tmp_path, near_ties):
     import torch
 
+    from learn.inputs import net_input
     from learn.train.checkpoint import LAST, load_checkpoint, model_from_checkpoint
     from tactile.dataset.reader import open_dataset
-    from tactile.resize import resize_image, resize_labels
+    from tactile.resize import resize_labels
 
     out, results = run
     shutil.copytree(out / "models", tmp_path / "o" / "models")  # HandsNet reused
@@ -293,22 +295,21 @@ def test_segnet_option_reports_a_mean_iou_that_pixel_counts_reproduce(run, tmp_p
     size = PLAN.image_px
     with open_dataset(results["test_set"]["dataset"]) as ds:
         test = ds.splits["test"]
-        x = np.stack(
-            [
-                resize_image(ds.image[i].astype(np.float32) / 255, size, keep_support=True)
-                for i in test
-            ]
-        )  # segmentation inputs (learn.inputs)
+        x = net_input(ds.image[np.sort(test)], size, "segment")[np.argsort(np.argsort(test))]
         truth = np.stack([resize_labels(ds.label_image[i], size) for i in test])
     with torch.no_grad():
-        pred = model(torch.from_numpy(x)[:, None]).argmax(1).numpy()
-    pred = np.where(x > 0, pred, 0)  # unpressed pixels are background (learn.inputs)
+        scores = model(torch.from_numpy(x)[:, None]).numpy()
+    pred = np.where(x > 0, scores.argmax(1), 0)  # unpressed pixels are background (learn.inputs)
+    unions = [np.sum((pred == c) | (truth == c)) for c in range(7) if np.any(truth == c)]
     ious = [
         np.sum((pred == c) & (truth == c)) / np.sum((pred == c) | (truth == c))
         for c in range(7)
         if np.any(truth == c)
     ]
-    assert res["settings"][0]["miou_pct"] == pytest.approx(100 * np.mean(ious))
+    # k decisions made the other way move each IoU by at most 2k / (its union - k)
+    k = near_ties.count(np.where(x[:, None] > 0, scores, np.eye(7)[0][:, None, None]))
+    tolerance = 100 * 2 * k / (min(unions) - k) if k else 1e-9
+    assert abs(res["settings"][0]["miou_pct"] - 100 * np.mean(ious)) <= tolerance
     assert (tmp_path / "o" / "speed_miou.png").is_file()
     assert "SegNet mIoU %" in (tmp_path / "o" / "report.md").read_text()
 

@@ -18,7 +18,7 @@ from learn.infer.predict import Predictor, predict_image, segment
 from learn.inputs import net_input, net_labels
 from tactile.config import to_dict
 from tactile.errors import ConfigError
-from tactile.resize import canvas_px, fit_canvas, resize_image, resize_labels
+from tactile.resize import canvas_px, fit_canvas, resize_grey, resize_labels
 
 from .conftest import SIZE
 
@@ -60,10 +60,10 @@ def test_canvas_px_rounds_and_refuses_a_bad_step():
 
 
 def square_print(map_shape: tuple[int, int], side: int = 20) -> np.ndarray:
-    """(H, W) float image in [0, 1]: a side × side px square pressed at the map's centre."""
-    img = np.zeros(map_shape, np.float32)
+    """(H, W) uint8 image: a side × side px square pressed at the map's centre (level 255)."""
+    img = np.zeros(map_shape, np.uint8)
     r, c = (map_shape[0] - side) // 2, (map_shape[1] - side) // 2
-    img[r : r + side, c : c + side] = 1.0
+    img[r : r + side, c : c + side] = 255
     return img
 
 
@@ -98,14 +98,14 @@ def test_dataset_inputs_and_labels_on_a_canvas_match_hand_made_padding(tiny_data
         top, left = (h - canvas[0]) // 2, (canvas[1] - w) // 2
         rows = slice(top, top + canvas[0])
         widths = ((0, 0), (left, canvas[1] - w - left))
-        ref_img = np.pad(image[rows].astype(np.float32) / 255, widths)
+        ref_img = np.pad(image[rows], widths)
         ref_lbl = np.pad(labels[rows], widths)
         x, y = ds[k]
-        np.testing.assert_allclose(x[0].numpy(), resize_image(ref_img, SIZE, keep_support=True))
+        np.testing.assert_array_equal(x[0].numpy(), resize_grey(ref_img, SIZE, keep_support=True))
         np.testing.assert_array_equal(y.numpy(), resize_labels(ref_lbl, SIZE))
         assert np.array_equal(x[0].numpy() > 0, y.numpy() > 0)
         j = list(clf.indices).index(i)
-        np.testing.assert_allclose(clf[j][0][0].numpy(), resize_image(ref_img, SIZE))
+        np.testing.assert_array_equal(clf[j][0][0].numpy(), resize_grey(ref_img, SIZE))
     np.testing.assert_array_equal(net_labels(ref_lbl, SIZE), resize_labels(ref_lbl, SIZE))
 
 

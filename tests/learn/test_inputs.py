@@ -23,8 +23,8 @@ def test_net_input_by_task_on_a_closed_form_case():
     """A single lit pixel of an (8, 8) image halved to (4, 4): the blur spreads it over the
         output, the segmentation input keeps only the pixel whose centre-rule source is lit, at no
     less than the image's smallest positive value."""
-    img = np.zeros((8, 8), np.float32)
-    img[3, 5] = 1.0  # output (1, 2) samples source (floor(1.5 * 2), floor(2.5 * 2)) = (3, 5)
+    img = np.zeros((8, 8), np.uint8)
+    img[3, 5] = 255  # output (1, 2) samples source (floor(1.5 * 2), floor(2.5 * 2)) = (3, 5)
     blur = net_input(img, (4, 4), "classify")
     kept = net_input(img, (4, 4), "segment")
     assert (blur > 0).sum() > 1

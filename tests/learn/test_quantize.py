@@ -194,7 +194,7 @@ def _input_of(predictor, image) -> torch.Tensor:
     from learn.inputs import net_input
 
     arr = net_input(
-        np.asarray(image, np.float32) / 255.0,
+        np.asarray(image, np.uint8),
         predictor.input_size,
         predictor.task,
         predictor.canvas(1.0),

@@ -27,7 +27,7 @@ def reference_item(path, i: int, size) -> tuple[np.ndarray, int]:
     x = np.zeros((FRAMES, *size), np.float32)
     for k in range(n):
         image = ds.images_from_raw(ds.seq_raw[i][k], time_s=0.1 * (k + 1))
-        x[k] = net_input(image.astype(np.float32) / 255.0, size, "classify")
+        x[k] = net_input(image, size, "classify")
     return x, int(ds.action[i])
 
 

@@ -71,13 +71,11 @@ def test_network_inputs_are_net_inputs(frames, canvas):
     resized, kept, box = np.zeros(SIZE, np.float32), np.zeros(SIZE, np.float32), None
     for p in [*to_pa(raw), *edge_frames(tmap)]:
         box = pix.fill(p, image, box)
-        x01 = image.astype(np.float32) / 255.0
         ops.resize(image, box, resized)
         ops.keep_support(resized, ext, box, kept)
-        np.testing.assert_allclose(resized, net_input(x01, SIZE, "classify", canvas), atol=1e-6)
-        reference = net_input(x01, SIZE, "segment", canvas)
-        assert np.array_equal(kept > 0, reference > 0)
-        np.testing.assert_allclose(kept, reference, atol=1e-6)
+        # exact by construction (tactile.resize.resize_grey): the same bytes on any CPU
+        assert np.array_equal(resized, net_input(image, SIZE, "classify", canvas))
+        assert np.array_equal(kept, net_input(image, SIZE, "segment", canvas))
 
 
 @pytest.mark.parametrize("canvas", [None, (40, 120)])
@@ -121,7 +119,7 @@ def test_recognizer_answers_as_predict_frame(frames, predictors, canvas_mm):
         answer, ref = rec.step(p), predict_frame(p, tmap, clf, seg, threshold_pa=100.0)
         check_answer(answer.as_json(), ref)
         assert answer.parts == ref.parts and answer.latency_ms > 0
-        x = net_input(ref.image.astype(np.float32) / 255.0, SIZE, "segment", seg.canvas(1.0))
+        x = net_input(ref.image, SIZE, "segment", seg.canvas(1.0))
         net = seg.logits(ref.image, tmap.step_mm).argmax(0).numpy() * (x > 0)
         assert np.array_equal(answer.segmentation, net)
         hands += answer.class_name == "hand" and answer.taxel_labels.any()

@@ -109,6 +109,37 @@ def test_a_missing_package_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> N
         check_warp(WarpOptions())
 
 
+def test_a_mismatched_pair_names_both_versions_and_the_fix(monkeypatch: pytest.MonkeyPatch):
+    from importlib import metadata
+
+    real = metadata.version
+    monkeypatch.setattr(
+        metadata, "version", lambda name: "3.9.9" if name == "mujoco-warp" else real(name)
+    )
+    mujoco_version = real("mujoco")
+    with pytest.raises(
+        ConfigError,
+        match=rf"mujoco-warp 3\.9\.9 does not match mujoco {mujoco_version}.*pip install "
+        r"'handskin\[warp\]' \(it pins a pair\), or pip install 'mujoco==3\.9\.9' "
+        r"'mujoco-warp==3\.9\.9'",
+    ):
+        check_warp(WarpOptions())
+
+
+def test_the_warp_extra_pins_the_pair_the_backend_needs() -> None:
+    """The installed pair agrees, and the extra pins mujoco and mujoco-warp to one version."""
+    from importlib import metadata
+
+    from tactile.config import tomllib
+
+    extra = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())
+    pins = dict(
+        r.split("==") for r in extra["project"]["optional-dependencies"]["warp"] if "==" in r
+    )
+    assert set(pins) == {"mujoco", "mujoco-warp"} and len(set(pins.values())) == 1, pins
+    assert metadata.version("mujoco-warp") == metadata.version("mujoco")
+
+
 def test_the_cli_names_the_flag(tmp_path: Path) -> None:
     out = tmp_path / "ds"
     args = ["generate", "--out", str(out), "--backend", "warp", "--worlds", "0"]
