@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -21,8 +22,17 @@ def wheel_site(tmp_path_factory) -> Path:
     """The wheel ``pip wheel .`` builds (isolated, as ``pip install .`` does), unpacked: a
     site-packages folder holding what ``pip install .`` would put there."""
     tmp = tmp_path_factory.mktemp("wheel")
+    source = tmp / "source"  # a copy: setuptools writes build/ into the folder it builds
+    top = {"build", "data", "out", "runs", "reports", ".git"}  # the user's and git's, not ours
+    shutil.copytree(
+        ROOT,
+        source,
+        ignore=lambda folder, names: [
+            n for n in names if Path(folder) == ROOT and n in top or n == "__pycache__"
+        ],
+    )
     build = subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp), str(ROOT)],
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp), str(source)],
         capture_output=True,
         text=True,
     )
