@@ -28,7 +28,7 @@ def wheel_site(tmp_path_factory) -> Path:
         ROOT,
         source,
         ignore=lambda folder, names: [
-            n for n in names if Path(folder) == ROOT and n in top or n == "__pycache__"
+            n for n in names if (Path(folder) == ROOT and n in top) or n == "__pycache__"
         ],
     )
     build = subprocess.run(
