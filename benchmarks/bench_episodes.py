@@ -4,7 +4,7 @@ of time between scene compilation, planning, stepping, skin readout and image ma
 Two figures:
 - *all samples*: samples 0..n-1 of the default forearm dataset (hands and non-hands in the
   paper's balance, every scene compiled as a fresh worker compiles it), through
-  `sim.sampler.sample_at`, the function each generator worker runs;
+  `sim.generate.sampler.sample_at`, the function each generator worker runs;
 - *hands, scenes warm*: hand samples only, each subject's scene compiled beforehand (the figure
   earlier versions of this benchmark printed).
 
@@ -22,10 +22,13 @@ from collections import Counter
 
 import numpy as np
 
-from sim import episode, generate_hands, press, sampler
-from sim.gen_config import GenerateConfig
-from sim.generate_hands import sample_hand
-from sim.subjects import sample_subjects
+from sim.contactors.subjects import sample_subjects
+from sim.episode import press
+from sim.episode import runner as episode
+from sim.generate import hands as generate_hands
+from sim.generate import sampler
+from sim.generate.config import GenerateConfig
+from sim.generate.hands import sample_hand
 
 TARGET_PER_S = 100.0  # labelled samples per CPU-second on one core (the speed issue's target)
 TIMERS: Counter = Counter()

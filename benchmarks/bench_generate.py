@@ -1,9 +1,9 @@
 """Dataset generation speed (samples/s) for 1 and 2 workers, peak memory (RSS), the time to
-refuse a folder of another configuration, and `sim.tiny.tiny_samples`' time for 8 samples.
+refuse a folder of another configuration, and `sim.generate.tiny.tiny_samples`' time for 8 samples.
 
-Runs `sim.generate.generate` on fresh temporary folders and prints wall time, samples/s, rejected
-episodes by reason and the peak resident set size of this process and of its worker processes
-(`resource.getrusage`, ru_maxrss in KiB on Linux). Timings on a shared machine are noisy.
+Runs `sim.generate.run.generate` on fresh temporary folders and prints wall time, samples/s,
+rejected episodes by reason and the peak resident set size of this process and of its worker
+processes (`resource.getrusage`, ru_maxrss in KiB on Linux). Timings on a shared machine are noisy.
 
 Run: ``PYTHONPATH=. python benchmarks/bench_generate.py [n_samples] [part] [workers ...]``
 (defaults: 256 samples of the forearm, workers 1 and 2).
@@ -17,9 +17,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from sim.gen_config import load_generate_config
-from sim.generate import generate
-from sim.tiny import tiny_map, tiny_samples
+from sim.generate.config import load_generate_config
+from sim.generate.run import generate
+from sim.generate.tiny import tiny_map, tiny_samples
 from tactile.errors import DataError
 
 

@@ -17,9 +17,9 @@ import time
 import mujoco
 import numpy as np
 
-from sim.parts import get_part
-from sim.scene import Contactor, SkinScene
-from sim.skin import SkinConfig, SkinInstance
+from sim.episode.scene import Contactor, SkinScene
+from sim.skin.model import SkinConfig, SkinInstance
+from sim.skin.parts import get_part
 
 N_STEPS = 2000
 N_FRAMES = 2000

@@ -19,9 +19,9 @@ import numpy as np  # noqa: E402
 from scipy.spatial import Delaunay  # noqa: E402
 from skimage.morphology import dilation, disk, erosion  # noqa: E402
 
-from tactile import morphology  # noqa: E402
-from tactile.synthetic import cylinder_sector_layout  # noqa: E402
-from tactile.tactile_map import TactileMap  # noqa: E402
+from tactile.geometry.synthetic import cylinder_sector_layout  # noqa: E402
+from tactile.images import morphology  # noqa: E402
+from tactile.images.tactile_map import TactileMap  # noqa: E402
 
 BATCH = 64  # frames per batched call
 

@@ -1,9 +1,9 @@
 """The warp backend's speed on warp's CPU device beside the C backend's, and a GPU projection.
 
 Figures (default forearm, one process, CPU seconds of this process and wall time):
-- *C backend*: samples 0..n-1 through `sim.sampler.sample_at` (what a C worker runs).
+- *C backend*: samples 0..n-1 through `sim.generate.sampler.sample_at` (what a C worker runs).
 - *warp, hand family*: the first W hand samples (attempt 0) stepped as one batch of W worlds, for
-  W in 8, 32, 128, prepared, stepped, read and made into samples by `sim.warp_backend`; the time
+  W in 8, 32, 128, prepared, stepped, read and made into samples by `sim.warp.backend`; the time
   split between preparing (C scene, device model), stepping (``mjw.step``/``forward``) and the
   host's per-frame readout and sample making. Every hand is one structure family, so this is the
   backend's best case.
@@ -32,17 +32,17 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from sim import sampler
-from sim.gen_config import GenerateConfig
-from sim.generate import generate
-from sim.warp_options import WarpOptions, check_warp
+from sim.generate import sampler
+from sim.generate.config import GenerateConfig
+from sim.warp.options import WarpOptions, check_warp
 
 check_warp(WarpOptions())  # quiet warp before it starts
 import mujoco_warp as mjw  # noqa: E402
 import warp as wp  # noqa: E402
 
-from sim import warp_backend  # noqa: E402
-from sim.warp_jobs import JobMaker  # noqa: E402
+from sim.warp import backend as warp_backend  # noqa: E402
+from sim.warp.jobs import JobMaker  # noqa: E402
+from sim.warp.run import generate as warp_generate  # noqa: E402
 
 # MJWarp's published throughput (steps/s, all worlds) of its humanoid (27 DoF, 20 geoms, Newton,
 # pyramidal cones), 8192 worlds on an NVIDIA RTX PRO 6000 Blackwell: pull request
@@ -136,7 +136,9 @@ def humanoid_step_s(worlds: int, nstep: int = 20) -> float:
 def all_samples(n: int, worlds: int = 32) -> float:
     cfg = GenerateConfig(n=n, backend="warp")
     with tempfile.TemporaryDirectory() as tmp:
-        run = generate(cfg, Path(tmp) / "ds", workers=1, progress=False, warp=WarpOptions(worlds))
+        run = warp_generate(
+            cfg, Path(tmp) / "ds", workers=1, progress=False, warp=WarpOptions(worlds)
+        )
     print(
         f"warp, all samples: {n} samples, --worlds {worlds}: {run.samples_per_s:.2f} samples/s "
         f"wall ({run.wall_s:.0f} s, rejects {run.rejects})"
@@ -160,7 +162,7 @@ def projection(rows: list[dict], ours: float, humanoid: float, shares: list[floa
     per_call = slope({r["worlds"]: r["step"] / r["step_calls"] for r in rows})[1]
     steps = big["step_calls"]  # batch steps (and forwards) of one episode, idle tail included
     per_sample = big["world_steps_per_sample"]
-    window = 4 * GPU_WORLDS  # samples per window (`sim.warp_backend.WINDOW_BATCHES` batches)
+    window = 4 * GPU_WORLDS  # samples per window (`sim.warp.backend.WINDOW_BATCHES` batches)
     gpu_s = 0.0  # GPU time of one window: each family in batches of at most GPU_WORLDS
     for share in shares:
         members = round(share * window)

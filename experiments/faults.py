@@ -4,7 +4,7 @@
 
 Copy c of sample i (train or validation part) draws its faults from
 ``stream(seed, KEY_COPIES, c, i)``: blind spots, dead modules and gain drift on the pressures
-(``tactile.faults``), then, with probability ``p_removal``, one map of a pool of rebuilt maps
+(``tactile.images.faults``), then, with probability ``p_removal``, one map of a pool of rebuilt maps
 with taxels removed (drawn from ``stream(seed, KEY_POOL, j)``, a stream the evaluation never
 uses, so no test pattern is seen in training). The image is regenerated through that map as
 the evaluation does; the segmentation target is the faulty frame's label image, background
@@ -22,9 +22,9 @@ from experiments.networks import split_data
 from learn.data.load import Data, TensorData
 from learn.inputs import input_canvas, net_labels
 from tactile.dataset.reader import DatasetReader
-from tactile.faults import dead_modules, gain_drift, nested_removal, zero_taxels
-from tactile.labels import label_image
-from tactile.tactile_map import TactileMap
+from tactile.images.faults import dead_modules, gain_drift, nested_removal, zero_taxels
+from tactile.images.labels import label_image
+from tactile.images.tactile_map import TactileMap
 
 
 def removal_pool(tmap: TactileMap, layout, mix, seed: int) -> list[RemovedMap]:

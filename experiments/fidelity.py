@@ -78,9 +78,10 @@ def generate_set(cfg, folder: Path, workers: int | None, progress: bool) -> dict
     which other jobs on a shared machine change little), cpu_s, wall_s, workers, n_computed.
     A complete dataset without a recorded timing is reused with speeds None (unknown)."""
     # start-up time: sim loads MuJoCo
-    from sim.executors import default_workers
-    from sim.gen_config import generator_version
-    from sim.generate import generate
+    from sim.generate.config import generator_version
+    from sim.generate.executors import default_workers
+    from sim.generate.run import generate
+    from sim.warp.run import generate as generate_on_warp
 
     timing_path = folder.parent / f"{folder.name}.timing.json"
     if (folder / "dataset.h5").is_file():
@@ -99,7 +100,8 @@ def generate_set(cfg, folder: Path, workers: int | None, progress: bool) -> dict
         unknown = ("samples_per_s", "per_core", "cpu_s", "wall_s", "workers")
         return dict.fromkeys(unknown) | {"n_computed": 0}
     cpu, workers = cpu_seconds(), workers or default_workers()
-    rep = generate(cfg, folder, workers=workers, progress=progress)
+    run = generate_on_warp if cfg.backend == "warp" else generate
+    rep = run(cfg, folder, workers=workers, progress=progress)
     cpu, done = cpu_seconds() - cpu, rep.n_computed
     timing = {"samples_per_s": rep.samples_per_s if done else None, "cpu_s": cpu}
     timing |= {"per_core": done / cpu if done and cpu > 0 else None, "wall_s": rep.wall_s}
@@ -151,7 +153,7 @@ def score_setting(arch: str, folder: Path, test_dir: Path, test, out: Path, plan
     from learn.train.runs import train_once
     from learn.train.validation import evaluate_tensors
     from tactile.config import to_dict
-    from tactile.labels import CLASS_NAMES
+    from tactile.images.labels import CLASS_NAMES
 
     run = probe_run(arch, plan)
     prints = [read_manifest(f)["fingerprint"] for f in (folder, test_dir)]
@@ -187,7 +189,7 @@ def run_fidelity(
     datasets : the folder of the generated datasets (default ``out/data``). Every input is
     checked before any work.
     """
-    from sim.gen_config import GenerateConfig, check_part  # start-up time: sim loads MuJoCo
+    from sim.generate.config import GenerateConfig, check_part  # start-up time: sim loads MuJoCo
 
     if plan.device != "cpu":
         from learn.train.device import check_device  # optional: torch (the learn extra)
@@ -235,7 +237,7 @@ def run_fidelity(
 
 def _check_warp() -> None:
     """ConfigError before any work when the warp setting cannot run here."""
-    from sim.warp_options import WarpOptions, check_warp  # start-up time: sim loads MuJoCo
+    from sim.warp.options import WarpOptions, check_warp  # start-up time: sim loads MuJoCo
 
     try:
         check_warp(WarpOptions())
@@ -244,7 +246,7 @@ def _check_warp() -> None:
 
 
 SettingsOpt = O.opt(str | None, f"Settings to run, comma-separated, of {', '.join(FS.BY_NAME)}.")
-PARTS = "forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector, plate"  # as sim.parts
+PARTS = "forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector, plate"  # as sim.skin.parts
 PartOpt = O.opt(str, f"Skin part: {PARTS}, or a link mesh (.stl/.obj, m).")
 
 

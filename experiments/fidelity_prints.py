@@ -1,5 +1,6 @@
 """The prints of each fidelity setting beside the default's: the statistics that say whether a
-cheaper simulation still makes the same data (`tactile.prints`), with 95 % bootstrap spreads."""
+cheaper simulation still makes the same data (`tactile.prints.measures`), with 95 % bootstrap
+spreads."""
 
 from __future__ import annotations
 
@@ -7,9 +8,9 @@ from pathlib import Path
 
 from experiments.report import markdown_table
 from tactile.dataset.reader import open_dataset
-from tactile.prints import bootstrap_mean, read_prints
+from tactile.prints.measures import bootstrap_mean, read_prints
 
-#: (contactor kind, statistic of `tactile.prints.Prints`, column header with unit)
+#: (contactor kind, statistic of `tactile.prints.measures.Prints`, column header with unit)
 STATISTICS: tuple[tuple[str, str, str], ...] = (
     ("hand", "active", "hand: active taxels"),
     ("hand", "parts", "hand: parts pressing"),

@@ -1,20 +1,20 @@
 """Simulation settings of the fidelity experiment, from cheap to rich, as changes of a
-`sim.gen_config.GenerateConfig`.
+`sim.generate.config.GenerateConfig`.
 
 Each setting is a set of dotted-key changes (``{"episode.timestep_s": 0.001}``) laid over one
 base configuration, so a knob of `GenerateConfig` becomes a setting by one line here. The knobs
 (docs/fidelity.md says why the others are not swept):
 
 - ``episode.timestep_s`` — MuJoCo time step, s. 5 ms is the default and the largest the hand's
-  soft tissue allows (`sim.hand.set_hand_options`: half the 10 ms tissue time constant), so the
-  time step can only be made *richer* (2.5 ms, 1 ms).
+  soft tissue allows (`sim.contactors.hand.set_hand_options`: half the 10 ms tissue time constant),
+  so the time step can only be made *richer* (2.5 ms, 1 ms).
 - ``episode.skin.spread_sigma_m`` — Gaussian spread of pressure through the skin's dielectric,
   m; 0 turns it off (each taxel reads only its own depth).
 - ``duration_scale`` — length of every simulated press (approach, load, hold, release),
   unitless; 0.5 simulates half the time.
 - ``keep_sequences`` — also simulate the release and store the 10 Hz sequence; the selected frame
   (hence the image) is the same as without it, so it is pure cost for a single-frame model.
-- ``hand_detail`` — "coarse" drops the palm's metacarpal and heel capsules (`sim.hand`).
+- ``hand_detail`` — "coarse" drops the palm's metacarpal and heel capsules (`sim.contactors.hand`).
 - ``episode.solver_iterations`` — MuJoCo's cap on solver iterations per step (default 100).
 - ``backend`` — "warp" steps the episodes as batched MuJoCo Warp worlds (float32, its own
   collision and solver) on warp's default device instead of C MuJoCo.
@@ -36,7 +36,7 @@ from tactile.config import override, to_dict
 from tactile.errors import ConfigError
 
 if TYPE_CHECKING:
-    from sim.gen_config import GenerateConfig
+    from sim.generate.config import GenerateConfig
 
 
 @dataclass(frozen=True)

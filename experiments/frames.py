@@ -20,9 +20,9 @@ import numpy as np
 from learn.inputs import net_input
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import DataError
-from tactile.labels import label_image
-from tactile.layout import TaxelLayout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.layout import TaxelLayout
+from tactile.images.labels import label_image
+from tactile.images.tactile_map import TactileMap
 
 #: First spawn-key element of each random stream drawn from the one --seed (kept disjoint).
 KEY_SUBSET, KEY_SPOTS, KEY_REMOVAL, KEY_POOL, KEY_COPIES = 1, 2, 3, 4, 5

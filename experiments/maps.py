@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tactile import raster
 from tactile.errors import ConfigError
-from tactile.layout import TaxelLayout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.layout import TaxelLayout
+from tactile.images import raster
+from tactile.images.tactile_map import TactileMap
 
 IGNORE = 255  # label of pixels that are not counted
 SEAM_AREA_RATIO = 4.0  # a triangle whose full-map area differs more than this spans a seam
@@ -29,7 +29,8 @@ SEAM_AREA_RATIO = 4.0  # a triangle whose full-map area differs more than this s
 
 def spot_centres_mm(uv: np.ndarray, n_spots: int, rng: np.random.Generator) -> np.ndarray:
     """Centres (n_spots, 2) mm: distinct random placed taxels (the draw of
-    ``tactile.faults.blind_spots``, which does not return them). uv : (N, 2) mm, NaN unplaced."""
+    ``tactile.images.faults.blind_spots``, which does not return them). uv : (N, 2) mm, NaN
+    unplaced."""
     placed = np.flatnonzero(np.isfinite(uv).all(axis=1))
     if not 0 <= n_spots <= len(placed):
         raise ConfigError(f"n_spots must be in 0..{len(placed)} (placed taxels), got {n_spots}")

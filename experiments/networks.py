@@ -30,7 +30,7 @@ from learn.train.device import check_device
 from learn.train.runs import train_once
 from learn.train.validation import logits_of
 from tactile.errors import ConfigError
-from tactile.labels import CLASS_NAMES
+from tactile.images.labels import CLASS_NAMES
 
 BATCH = 64  # images per forward pass
 CLASSES = {"classify": 2, "segment": 7}  # classes the robustness tests score

@@ -22,8 +22,8 @@ from experiments.frames import CHUNK, KEY_REMOVAL, KEY_SPOTS, Frames, net_inputs
 from experiments.maps import IGNORE, discarded_hand_pixels, rebuild, spot_pattern, warp_labels
 from learn import metrics as M
 from learn.inputs import net_labels
-from tactile.faults import nested_removal, zero_taxels
-from tactile.labels import label_image
+from tactile.images.faults import nested_removal, zero_taxels
+from tactile.images.labels import label_image
 
 
 def run_rows(tmap, p: np.ndarray, is_clf: np.ndarray, is_seg: np.ndarray, models):

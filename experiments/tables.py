@@ -39,7 +39,7 @@ def setup_text(data, prep, truth: str) -> str:
         f"Dataset `{data}`: test split of {f.n_split} samples; {len(f.classify)} classified"
         f"{segmented} (seeded subsets when fewer than all; every pattern is drawn from --seed). "
         "Images are regenerated from the raw readings through the corrupted map "
-        "(`TactileMap.image`), label images with `tactile.labels.label_image`.",
+        "(`TactileMap.image`), label images with `tactile.images.labels.label_image`.",
         "",
     ]
     for m in prep.info:

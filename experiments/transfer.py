@@ -83,7 +83,8 @@ class DataPlan:
     n_target: int = 1000  # target samples (70 % train / 30 % test, subject-disjoint)
     n_pretrain: int = 1000  # synthetic pretraining samples of the target part
     workers: int = 1  # generation processes (count); the bytes do not depend on it
-    tiny: bool = False  # sim.tiny's settings: 6 subjects, 2 instances per kind, short presses
+    # sim.generate.tiny's settings: 6 subjects, 2 instances per kind, short presses
+    tiny: bool = False
 
 
 QUICK_DATA = DataPlan(n_target=200, n_pretrain=400)
@@ -101,9 +102,9 @@ def dataset_seed(seed: int, role: str) -> int:
 def generate_config(part: str, n: int, seed: int, tiny: bool = False):
     """The GenerateConfig of a generated set (validated: ConfigError names the field)."""
     # start-up time: sim loads MuJoCo
-    from sim.episode import EpisodeConfig
-    from sim.gen_config import GenerateConfig
-    from sim.tiny import TINY_DURATION_SCALE, TINY_MAX_ATTEMPTS
+    from sim.episode.runner import EpisodeConfig
+    from sim.generate.config import GenerateConfig
+    from sim.generate.tiny import TINY_DURATION_SCALE, TINY_MAX_ATTEMPTS
 
     cfg = {"part": part, "n": n, "seed": seed}
     if tiny:
@@ -114,8 +115,8 @@ def generate_config(part: str, n: int, seed: int, tiny: bool = False):
 
 def ensure_dataset(folder: Path, cfg, workers: int, progress: bool) -> Path:
     """``folder`` holding the dataset of ``cfg``: reused when its dataset.h5 holds this part,
-    size and seed, else generated there (``sim.generate``)."""
-    from sim.generate import generate  # start-up time: sim loads MuJoCo
+    size and seed, else generated there (``sim.generate.run``)."""
+    from sim.generate.run import generate  # start-up time: sim loads MuJoCo
 
     if not (folder / "dataset.h5").is_file():
         generate(cfg, folder, workers=workers, progress=progress)

@@ -43,7 +43,7 @@ from learn.train.validation import evaluate_tensors
 from tactile.config import to_dict
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError
-from tactile.labels import CLASS_NAMES
+from tactile.images.labels import CLASS_NAMES
 
 ARCH = {"classify": "handsnet", "segment": "segnet"}
 AT_SCALE = "forearm at scale"  # the source model on a canvas of its map (keep_scale)

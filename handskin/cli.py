@@ -11,13 +11,13 @@ import typer
 from experiments.cli import register as register_experiments
 from handskin import __version__
 from learn.cli import register as register_learn
-from sim.cli import register as register_sim
-from sim.view_cli import register as register_view
-from tactile.cli import register as register_tactile
-from tactile.dataset.cli import register as register_dataset
+from sim.cli.parts import register as register_sim
+from sim.cli.view import register as register_view
+from tactile.cli.dataset import register as register_dataset
+from tactile.cli.map import register as register_tactile
+from tactile.cli.stats import register as register_stats
 from tactile.errors import HandskinError
 from tactile.files import os_error_text
-from tactile.stats_cli import register as register_stats
 
 app = typer.Typer(
     name="handskin",

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tactile.resize import canvas_px, fit_canvas, resize_grey, resize_labels
+from tactile.images.resize import canvas_px, fit_canvas, resize_grey, resize_labels
 
 #: The rule of `net_input`, stored in every checkpoint (``learn.train.checkpoint``): segmentation
 #: inputs on their labels' support since this name; a segmenter without it was trained on
@@ -70,11 +70,11 @@ def net_input(
 ) -> np.ndarray:
     """Network input of tactile image(s) (H, W) or (B, H, W) uint8 grey levels: the
     anti-aliased resize to ``size`` (h, w) px, scaled to [0, 1] float32
-    (`tactile.resize.resize_grey`: the same bytes on any CPU and on the frame path); for
+    (`tactile.images.resize.resize_grey`: the same bytes on any CPU and on the frame path); for
     ``task == "segment"`` kept on the support its nearest-neighbour labels have
     (``keep_support``), so that zero input is background in the labels too. ``canvas`` (H', W')
-    map pixels (`input_canvas`): centred on it first (`tactile.resize.fit_canvas`). Same shape
-    as ``grey`` with (h, w) last."""
+    map pixels (`input_canvas`): centred on it first (`tactile.images.resize.fit_canvas`). Same
+    shape as ``grey`` with (h, w) last."""
     if canvas is not None:
         grey = fit_canvas(grey, canvas)
     return resize_grey(grey, size, keep_support=task == "segment")
@@ -84,7 +84,7 @@ def net_labels(
     labels: np.ndarray, size: tuple[int, int], canvas: tuple[int, int] | None = None
 ) -> np.ndarray:
     """Label image(s) (H, W) or (B, H, W) at the network's (h, w): centred on ``canvas`` (map
-    pixels) when given, then the nearest-neighbour resize (`tactile.resize.resize_labels`).
+    pixels) when given, then the nearest-neighbour resize (`tactile.images.resize.resize_labels`).
     Same dtype."""
     if canvas is not None:
         labels = fit_canvas(labels, canvas)

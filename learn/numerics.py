@@ -11,8 +11,8 @@ The mode (flush-to-zero and denormals-are-zero) belongs to each CPU thread:
 - torch's worker threads inherit it when they start, so importing this module (``learn.models``
   and ``learn.checkpoint`` do) starts them with it, and they only ever run torch kernels;
 - the calling thread also runs numpy, scipy, trimesh and MuJoCo code (``sim``, ``tactile``),
-  which must keep IEEE 754 arithmetic (a KD-tree build in ``sim.placement`` crashed under the
-  flush mode), so it flushes only inside :func:`flushing` (training epochs, evaluation,
+  which must keep IEEE 754 arithmetic (a KD-tree build in ``sim.contactors.placement`` crashed under
+  the flush mode), so it flushes only inside :func:`flushing` (training epochs, evaluation,
   timing, prediction, int8 calibration and VGG16 features use it;
   ``tests/learn/test_flushing_paths.py`` checks each).
 

@@ -7,7 +7,10 @@ no torch).
 """
 
 from tactile.errors import ConfigError, DataError, HandskinError, LayoutError, MapError
-from tactile.faults import (
+from tactile.geometry.flatten import Flattening, flatten
+from tactile.geometry.layout import TaxelLayout
+from tactile.geometry.surface import SurfaceMesh, triangulate
+from tactile.images.faults import (
     blind_spots,
     dead_modules,
     gain_drift,
@@ -15,8 +18,7 @@ from tactile.faults import (
     stuck_at,
     zero_taxels,
 )
-from tactile.flatten import Flattening, flatten
-from tactile.labels import (
+from tactile.images.labels import (
     CLASS_NAMES,
     N_CLASSES,
     PALETTE,
@@ -26,10 +28,8 @@ from tactile.labels import (
     label_image,
     part_summary,
 )
-from tactile.layout import TaxelLayout
-from tactile.resize import NET_SIZE, resize_image, resize_labels
-from tactile.surface import SurfaceMesh, triangulate
-from tactile.tactile_map import TactileMap
+from tactile.images.resize import NET_SIZE, resize_image, resize_labels
+from tactile.images.tactile_map import TactileMap
 
 __all__ = [
     "CLASS_NAMES",

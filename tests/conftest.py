@@ -73,7 +73,7 @@ def keyed_reference():
 #: size or layout, or another CPU, runs other kernels (oneDNN and BLAS choose by instruction set
 #: and shape), whose float32 sums come in another order: the tests' small networks then give
 #: logits and probabilities about 1e-6 apart, so only decisions whose two best scores lie closer
-#: than this can differ. Exactly equal inputs are the job of `tactile.resize.resize_grey`.
+#: than this can differ. Exactly equal inputs are the job of `tactile.images.resize.resize_grey`.
 NEAR_TIE = 1e-4
 
 

@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 
 from handskin.cli import app
 from tactile import files
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
 
 runner = CliRunner()
 SMALL = """part = "plate"\nn = 12\nchunk_size = 3\nn_subjects = 3\ninstances_per_kind = 2

@@ -9,8 +9,8 @@ import pytest
 from typer.testing import CliRunner
 
 from handskin.cli import app
-from tactile.synthetic import cylinder_sector_layout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.synthetic import cylinder_sector_layout
+from tactile.images.tactile_map import TactileMap
 
 runner = CliRunner()
 
@@ -64,13 +64,13 @@ def test_map_reports_a_bad_layout_and_exits_2(tmp_path: Path):
     [("part", None), ("generate", "--part"), ("view", "--part"), ("experiment", "--part")],
 )
 def test_part_help_names_every_built_in_part(command: str, option: str | None):
-    """The part lists in help texts are typed out (importing sim.parts would slow --help); they
+    """The part lists in help texts are typed out (importing sim.skin.parts would slow --help); they
     must name every part the registry builds."""
     import re
 
     import typer.main
 
-    from sim.parts import PARTS
+    from sim.skin.parts import PARTS
 
     group = typer.main.get_command(app)
     cmd = group.commands[command]  # type: ignore[attr-defined]

@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -34,46 +36,68 @@ def test_learn_never_imports_sim():
     assert "import sim" not in source and "from sim" not in source
 
 
-#: learn/'s stages in the order of the data's journey; a module imports only its own stage's
-#: modules and earlier stages' (the top-level modules config, inputs, numerics and metrics first).
-LEARN_STAGES = ("base", "models", "data", "train", "infer", "evaluate", "classical", "cli")
+#: Each package's stages in the order of the data's journey; a module imports only its own
+#: stage's modules and earlier stages' ("base": the package's top-level modules, first).
+STAGES = {
+    "learn": ("base", "models", "data", "train", "infer", "evaluate", "classical", "cli"),
+    "sim": ("base", "skin", "contactors", "episode", "generate", "warp", "view", "cli"),
+    "tactile": ("base", "geometry", "images", "figures", "dataset", "prints", "cli"),
+}
 
 
-def _learn_imports() -> dict[str, set[str]]:
-    """learn module name -> the learn modules it imports anywhere (top level or in functions)."""
+def _imports(package: str) -> dict[str, set[str]]:
+    """Module name -> the modules of ``package`` it imports anywhere (top level or in
+    functions)."""
     import ast
 
+    files = {
+        ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): path
+        for path in (ROOT / package).rglob("*.py")
+    }
     graph = {}
-    for path in (ROOT / "learn").rglob("*.py"):
-        name = ".".join(path.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+    for name, path in files.items():
         found = set()
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-                mods = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+                mods = [f"{node.module}.{a.name}" for a in node.names]
+                # ``from pkg import module`` names the module, not the package's facade
+                mods += [node.module] if not set(mods) <= set(files) else []
             elif isinstance(node, ast.Import):
                 mods = [a.name for a in node.names]
             else:
                 continue
-            found |= {m for m in mods if m.split(".")[0] == "learn"}
+            found |= {m for m in mods if m.split(".")[0] == package}
         graph[name] = found
     return graph
 
 
 def _stage(module: str) -> int:
-    parts = module.split(".")
-    inner = parts[1] if len(parts) > 1 else "base"
-    return LEARN_STAGES.index(inner if inner in LEARN_STAGES else "base")
+    package, *parts = module.split(".")
+    stages = STAGES[package]
+    if not parts:
+        return len(stages)  # the package's facade (tactile's public names) sits above it all
+    inner = parts[0] if parts else "base"
+    return stages.index(inner if inner in stages else "base")
 
 
-def test_learn_stages_import_one_way():
-    """No learn module imports a later stage's (so the stages hold no import cycle)."""
-    graph = _learn_imports()
+@pytest.mark.parametrize("package", sorted(STAGES))
+def test_stages_import_one_way(package):
+    """No module imports a later stage's (so the stages hold no import cycle); every
+    subpackage is a known stage."""
+    graph = _imports(package)
+    subpackages = {p.name for p in (ROOT / package).iterdir() if (p / "__init__.py").is_file()}
+    assert subpackages <= set(STAGES[package]), subpackages - set(STAGES[package])
     known = set(graph)
     later = {
         m: sorted(d for d in deps if d in known and _stage(d) > _stage(m))
         for m, deps in graph.items()
     }
     assert not {m: d for m, d in later.items() if d}
+
+
+@pytest.mark.parametrize("package", ["sim", "tactile"])
+def test_at_most_twelve_modules_at_the_top(package):
+    assert len(list((ROOT / package).glob("*.py"))) <= 12
 
 
 def test_learn_never_imports_experiments():

@@ -21,7 +21,7 @@ from torch.utils.data import Dataset
 from learn.inputs import PAPER_VIEWS, flip_view, input_canvas, net_input, net_labels
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
-from tactile.faults import (
+from tactile.images.faults import (
     blind_spots,
     dead_modules,
     gain_drift,
@@ -29,8 +29,8 @@ from tactile.faults import (
     stuck_at,
     zero_taxels,
 )
-from tactile.resize import NET_SIZE
-from tactile.tactile_map import TactileMap
+from tactile.images.resize import NET_SIZE
+from tactile.images.tactile_map import TactileMap
 
 TASKS = ("classify", "segment")
 SPLITS = ("train", "test")
@@ -43,7 +43,7 @@ FaultFn = Callable[[np.ndarray, np.random.Generator], np.ndarray]  # (N,) Pa, rn
 class FaultSpec:
     """Sensor faults applied to a sample's pressures (from its raw readings) before imaging.
 
-    blind_spots : (n_spots, radius_mm) — Test A (tactile.faults.blind_spots), or None.
+    blind_spots : (n_spots, radius_mm) — Test A (tactile.images.faults.blind_spots), or None.
     dead_modules : int, whole modules reading zero (needs layout module ids).
     stuck_fraction : float in [0, 1], taxels stuck at a random level in [0, max p].
     gain_sigma : float >= 0, std of the log gain (gain drift).

@@ -24,8 +24,8 @@ from torch.utils.data import Dataset
 
 from learn.inputs import PAPER_VIEWS, flip_view, net_input
 from tactile.errors import DataError
-from tactile.labels import CLASS_NAMES, PALETTE
-from tactile.resize import resize_labels
+from tactile.images.labels import CLASS_NAMES, PALETTE
+from tactile.images.resize import resize_labels
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 HAND_NAMES = ("non_hand", "hand")

@@ -27,7 +27,7 @@ from learn.inputs import mirror_classes
 from tactile.dataset.reader import DATASET, DatasetReader
 from tactile.dataset.splits import split_indices
 from tactile.errors import ConfigError, DataError
-from tactile.labels import CLASS_NAMES
+from tactile.images.labels import CLASS_NAMES
 
 
 @dataclass

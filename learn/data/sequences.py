@@ -23,7 +23,7 @@ from torch.utils.data import Dataset
 from learn.inputs import input_canvas, net_input
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
-from tactile.resize import NET_SIZE
+from tactile.images.resize import NET_SIZE
 
 FRAME_PERIOD_S = 0.1  # s: the skin is read at 10 Hz; frame k is read at (k + 1) x this
 #: Frames of every network input: 1.2 s at 10 Hz holds a hand press's 8-12 frames (approach,

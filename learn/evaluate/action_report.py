@@ -59,10 +59,10 @@ def cue_table(cues: dict[str, dict]) -> list[str]:
         "### What tells a mirror pair apart on the skin",
         "",
         "From the end of the load to the end of the hold, each test press's print moves "
-        "(`tactile.motion`): its centre of pressure shifts across the hand (the palm-to-fingers "
-        "axis of its label image, turned a quarter turn counter-clockwise on the map) and its "
-        "long axis turns (counter-clockwise positive). The skin reads pressure, not shear: this "
-        "is what a network can see of a push's side or a twist's sense.",
+        "(`tactile.prints.motion`): its centre of pressure shifts across the hand (the "
+        "palm-to-fingers axis of its label image, turned a quarter turn counter-clockwise on the "
+        "map) and its long axis turns (counter-clockwise positive). The skin reads pressure, not "
+        "shear: this is what a network can see of a push's side or a twist's sense.",
         "",
         "| action | presses | shift across the hand, mm: mean (SD) | turn, °: mean (SD) |",
         "|---|---|---|---|",

@@ -29,7 +29,7 @@ from learn.inputs import mirror_classes
 from learn.numerics import flushing
 from learn.train.validation import logits_of
 from tactile.dataset.reader import DatasetReader
-from tactile.motion import hand_axis, print_motion
+from tactile.prints.motion import hand_axis, print_motion
 
 HANDS = ("right", "left")
 
@@ -64,8 +64,8 @@ def _frame_at(t_s: float, n: int) -> int:
 
 def mirror_cues(data_path: Path, test: SequenceTest) -> dict[str, dict] | None:
     """Per action of a mirror pair, how its test presses' prints move from the end of the load
-    to the end of the hold (`tactile.motion.print_motion`, in the hand's axes from each press's
-    label image): presses, and mean and SD of ``across_mm`` and ``turn_deg``. None without
+    to the end of the hold (`tactile.prints.motion.print_motion`, in the hand's axes from each
+    press's label image): presses, and mean and SD of ``across_mm`` and ``turn_deg``. None without
     mirror pairs, label images or phase times."""
     names, pairs = test.class_names, mirror_pairs(test.class_names)
     wanted = sorted({a for pair in pairs for a in pair})

@@ -22,7 +22,7 @@ import torch
 from learn import metrics as M
 from learn.data.load import is_dataset, open_split
 from tactile.errors import DataError
-from tactile.prints import bootstrap_mean
+from tactile.prints.measures import bootstrap_mean
 
 BOOT_SEED = 0  # seed of the accuracy's bootstrap interval
 KEY = "by_contacts"  # the report row's key

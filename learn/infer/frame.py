@@ -6,13 +6,14 @@ the network's labels back to the taxels without the full-size label image.
     box = pix.fill(p, image)           # image (H, W) uint8 = tmap.image(p); box: rows, columns
     ops = InputOps.build(tmap, input_size=(68, 100), canvas=None)
     x = ops.resize(image, box, out)    # (h, w) float32 = learn.inputs.net_input(image / 255, ...)
-    labels = TaxelVotes.build(tmap, ops).labels(net_labels, image)   # = tactile.labels.backproject
+    labels = TaxelVotes.build(tmap, ops).labels(net_labels, image)   # =
+    tactile.images.labels.backproject
 
-Each operator is the reference's own (`tactile.resize`, `learn.inputs`, `tactile.labels`), so
-it computes the same bytes: the anti-aliased resize as the exact float64 operators of
-`tactile.resize.resize_grey` (``rows @ grey @ cols.T / 255``, whose sums are exact in any
-order) with the canvas folded in, the nearest-neighbour resizes as index arrays, the
-back-projection as a vote over each taxel's 2-pixel neighbourhood.
+Each operator is the reference's own (`tactile.images.resize`, `learn.inputs`,
+`tactile.images.labels`), so it computes the same bytes: the anti-aliased resize as the exact
+float64 operators of `tactile.images.resize.resize_grey` (``rows @ grey @ cols.T / 255``, whose sums
+are exact in any order) with the canvas folded in, the nearest-neighbour resizes as index arrays,
+the back-projection as a vote over each taxel's 2-pixel neighbourhood.
 Only the box of the map a frame presses is touched: the look-up table's rows, the erosion and
 dilation (exact there: the box keeps a margin wider than both disks) and the resize's columns.
 """
@@ -25,11 +26,11 @@ import numpy as np
 import torch
 
 from learn.inputs import labels_on_map
-from tactile.labels import N_CLASSES, neighbourhood_matrix
-from tactile.morphology import erode_dilate
-from tactile.raster import grey_levels
-from tactile.resize import fit_canvas, resize_labels, resize_operator
-from tactile.tactile_map import TactileMap
+from tactile.images.labels import N_CLASSES, neighbourhood_matrix
+from tactile.images.morphology import erode_dilate
+from tactile.images.raster import grey_levels
+from tactile.images.resize import fit_canvas, resize_labels, resize_operator
+from tactile.images.tactile_map import TactileMap
 
 Box = tuple[int, int, int, int]  # rows r0:r1, columns c0:c1 of the map grid, pixels
 
@@ -84,7 +85,7 @@ class ImageOps:
 
 def _axis_operator(n_in: int, n_canvas: int | None, n_out: int) -> np.ndarray:
     """(n_out, n_in) float64: the canvas fit then the anti-aliased resize along one axis, the
-    weights those of `tactile.resize.resize_operator` (a fit selects one of them or none)."""
+    weights those of `tactile.images.resize.resize_operator` (a fit selects one of them or none)."""
     fit = np.eye(n_in) if n_canvas is None else fit_canvas(np.eye(n_in), (n_canvas, n_in))
     return resize_operator(fit.shape[0], n_out) @ fit
 
@@ -159,7 +160,7 @@ class InputOps:
     ) -> np.ndarray:
         """``out`` (h, w) float32 := a segmenter's input from ``resized`` (`resize`): zero off
         the nearest-neighbour support of the pressed pixels, at least the smallest pressed
-        pixel on the canvas inside it (`tactile.resize.resize_image` ``keep_support``).
+        pixel on the canvas inside it (`tactile.images.resize.resize_image` ``keep_support``).
         ``image_ext`` (H * W + 1,) uint8: a 0, then the map image's pixels."""
         out[:] = 0
         if box is None:
@@ -177,8 +178,8 @@ class InputOps:
 
 @dataclass(frozen=True)
 class TaxelVotes:
-    """`tactile.labels.backproject` as a vote: each entry (``taxel``, map ``pixel``: flat index
-    + 1) of the taxels' 2-pixel neighbourhoods, in the order of the pixels, with the network
+    """`tactile.images.labels.backproject` as a vote: each entry (``taxel``, map ``pixel``: flat
+    index + 1) of the taxels' 2-pixel neighbourhoods, in the order of the pixels, with the network
     input pixel the map pixel takes its label from (``source``: flat index + 1, 0 off the
     canvas); ``width``: the map's, pixels."""
 

@@ -10,8 +10,8 @@ figure (errors in red when the ground truth is known) and the Fig. 18 per-part b
     pred.class_name, pred.probability, pred.parts["index"].n_taxels, pred.taxel_labels
     save_figures(pred, "pred.png")                   # pred.png and pred_parts.png
 
-Per-taxel labels follow `tactile.labels.backproject`: a taxel takes the most frequent hand part
-among the segmented pixels within 2 pixels (2 · step_mm) of it on the map, background if none.
+Per-taxel labels follow `tactile.images.labels.backproject`: a taxel takes the most frequent hand
+part among the segmented pixels within 2 pixels (2 · step_mm) of it on the map, background if none.
 """
 
 from __future__ import annotations
@@ -34,9 +34,9 @@ from learn.numerics import flushing
 from learn.train.checkpoint import is_int8, load_checkpoint, model_from_checkpoint
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
-from tactile.labels import PartSummary, backproject, contact_instances, part_summary
-from tactile.layout import TaxelLayout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.layout import TaxelLayout
+from tactile.images.labels import PartSummary, backproject, contact_instances, part_summary
+from tactile.images.tactile_map import TactileMap
 
 
 @dataclass
@@ -175,7 +175,7 @@ def attach_taxels(
     pred: Prediction, tmap: TactileMap, p: np.ndarray, threshold_pa: float = 0.0
 ) -> Prediction:
     """Fill ``pressure`` (N,) Pa, ``contacts`` (the pressed taxels grouped into separate
-    contacts, `tactile.labels.contact_instances`) and, with a segmentation, ``taxel_labels``
+    contacts, `tactile.images.labels.contact_instances`) and, with a segmentation, ``taxel_labels``
     (back-projected) and ``parts`` (taxels with p > ``threshold_pa`` per predicted part), also
     per contact (``contact_parts``). Returns ``pred``."""
     pred.pressure, pred.threshold_pa = np.asarray(p, np.float64), float(threshold_pa)
@@ -293,8 +293,8 @@ def save_figures(pred: Prediction, path: str | Path, name: str = "predicted") ->
     red; image | predicted without ground truth; the image alone without a segmentation), and
     with per-taxel labels the Fig. 18 bars at ``<stem>_parts.png``. ``name``: the prediction's
     caption. The classifier's decision is the figure's title."""
-    # start-up: tactile.figures loads matplotlib's drawing stack (~1 s), for pictures only
-    from tactile.figures import part_bars_figure, prediction_figure, save_figure
+    # start-up: tactile.figures.panels loads matplotlib's drawing stack (~1 s), for pictures only
+    from tactile.figures.panels import part_bars_figure, prediction_figure, save_figure
 
     path = Path(path)
     title = (

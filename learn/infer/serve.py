@@ -32,7 +32,7 @@ from learn.infer import transport as T
 from learn.infer.predict import load_map, load_predictor
 from learn.infer.stream import Recognizer, bf16_weights, compiled
 from tactile.errors import ConfigError, DataError, HandskinError
-from tactile.layout import TaxelLayout
+from tactile.geometry.layout import TaxelLayout
 
 
 def parse_values(payload: bytes) -> np.ndarray:

@@ -27,8 +27,8 @@ from learn.infer.predict import Predictor
 from learn.numerics import flushing
 from learn.train.device import bf16_supported
 from tactile.errors import ConfigError, DataError
-from tactile.labels import PartSummary, part_summary
-from tactile.tactile_map import TactileMap
+from tactile.images.labels import PartSummary, part_summary
+from tactile.images.tactile_map import TactileMap
 
 
 @dataclass

@@ -3,7 +3,7 @@ ingest of real recordings and PNG export. Format: ``docs/dataset_format.md``.
 
     writer = DatasetWriter(out, config=cfg, part=name, generator_version=v, seed=s,
                            tmap=tmap, layout=layout)
-    writer.write_chunk(0, samples); writer.merge()          # synthetic (sim/generate.py)
+    writer.write_chunk(0, samples); writer.merge()          # synthetic (sim/generate/run.py)
     ingest_recording("layout.txt", "frames.csv", out)        # real recording
     ds = open_dataset(out); ds[0]["image"], ds.splits["train"], ds.map
     verify_dataset(out).faults                               # every damage named, with its fix

@@ -25,7 +25,7 @@ from tqdm import tqdm
 from tactile.dataset.reader import DatasetReader, open_dataset
 from tactile.errors import DataError
 from tactile.files import atomic_path, remove_stale, writing
-from tactile.labels import colorize
+from tactile.images.labels import colorize
 
 FOLDERS = ("hand", "non_hand", "labels", "unlabelled")
 MARKER = "export.json"  # OUT/export.json: which dataset this folder is an export of

@@ -21,10 +21,10 @@ import h5py
 import numpy as np
 
 from tactile.dataset.h5sink import SafeSink
-from tactile.distortion import DistortionReport
 from tactile.files import atomic_path
-from tactile.layout import TaxelLayout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.distortion import DistortionReport
+from tactile.geometry.layout import TaxelLayout
+from tactile.images.tactile_map import TactileMap
 
 GZIP_LEVEL = 4  # zlib level: ~the size of level 9 at a fraction of the time on sparse images
 SCALAR_CHUNK = 1024  # samples per HDF5 chunk of a scalar field (one sample would waste space)

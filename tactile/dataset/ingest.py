@@ -25,9 +25,9 @@ import numpy as np
 
 from tactile.dataset.writer import DatasetWriter
 from tactile.errors import DataError
-from tactile.labels import N_CLASSES
-from tactile.layout import TaxelLayout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.layout import TaxelLayout
+from tactile.images.labels import N_CLASSES
+from tactile.images.tactile_map import TactileMap
 
 GENERATOR_VERSION = "ingest/1"
 CHUNK_FRAMES = 256  # frames per chunk file: ~1-3 MB of images at 1 mm/px

@@ -26,7 +26,7 @@ from tactile.dataset.schema import BY_NAME, Dims, info_fields
 from tactile.dataset.splits import METHODS, TRAIN_FRACTION, split_indices
 from tactile.errors import DataError
 from tactile.files import disk_error, remove_stale
-from tactile.labels import CLASS_NAMES, N_CLASSES
+from tactile.images.labels import CLASS_NAMES, N_CLASSES
 
 PACKAGES = ("numpy", "h5py", "scipy", "scikit-image", "mujoco", "handskin")
 ATTR_DOCS = {

@@ -23,8 +23,8 @@ from tactile.dataset.folder import DATASET, INFO
 from tactile.dataset.readout import Readout
 from tactile.dataset.schema import BY_NAME, FIELDS, STR
 from tactile.errors import DataError
-from tactile.layout import TaxelLayout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.layout import TaxelLayout
+from tactile.images.tactile_map import TactileMap
 
 JSON_ATTRS = frozenset({"config", "versions", "class_balance", "rejects", "split_report"})
 

@@ -3,8 +3,8 @@
     ro = Readout.of(attrs)                       # from a dataset's root attributes
     p = ro.pressure_pa(raw, time_s)              # (B, N) counts, (B,) s -> (B, N) Pa
 
-The generator images what this readout gives (`sim.skin.SkinInstance.readout`, used by
-`sim.episode_frames.sensed_pressure`): ``reading - (baseline + drift * t)``, with signals at or
+The generator images what this readout gives (`sim.skin.model.SkinInstance.readout`, used by
+`sim.episode.frames.sensed_pressure`): ``reading - (baseline + drift * t)``, with signals at or
 below the noise floor (3 noise sd) read as 0, over the nominal gain (the per-taxel gain spread is
 unknown to a robot, so it is not undone). A dataset stores it as root attributes (`attrs`);
 with all of them stored, the images regenerated from ``raw`` and ``time_s`` equal the stored

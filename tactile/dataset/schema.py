@@ -1,7 +1,7 @@
 """The dataset's fields in one table, and validation of one sample dict against it.
 
 A *sample* is a dict ``{field name: value}`` for one accepted episode, as produced by the
-simulation (``sim/generate.py``) or by :mod:`tactile.dataset.ingest`. Shapes are templates over
+simulation (``sim/generate/run.py``) or by :mod:`tactile.dataset.ingest`. Shapes are templates over
 the dataset's dimensions: N taxels, (H, W) map pixels, T sequence frames (see :class:`Dims`).
 Every dataset holds ``raw``, ``pressure_pa`` and ``image``; the other fields are optional, but
 all samples of one dataset carry the same set. Field names are the sample-dict keys; ``path`` is
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tactile.errors import DataError
-from tactile.labels import N_CLASSES
+from tactile.images.labels import N_CLASSES
 
 STR = "str"  # dtype marker of variable-length UTF-8 strings (h5py.string_dtype())
 MAX_CONTACTS = 2  # contactors pressing at once in one sample

@@ -28,8 +28,8 @@ from tactile.dataset.merge import merge_chunks
 from tactile.dataset.schema import BY_NAME, STR, Dims, validate_sample
 from tactile.errors import DataError
 from tactile.files import remove_stale
-from tactile.layout import TaxelLayout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.layout import TaxelLayout
+from tactile.images.tactile_map import TactileMap
 
 RESERVED_ATTRS = frozenset(
     {

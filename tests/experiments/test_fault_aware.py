@@ -20,8 +20,8 @@ from experiments.settings import FaultMix, Scale
 from learn.train.checkpoint import load_checkpoint
 from tactile.dataset import open_dataset
 from tactile.errors import ConfigError
-from tactile.faults import nested_removal, zero_taxels
-from tactile.labels import label_image
+from tactile.images.faults import nested_removal, zero_taxels
+from tactile.images.labels import label_image
 
 NO_FAULTS = FaultMix(p_blind=0.0, p_dead=0.0, p_drift=0.0, p_removal=0.0)
 

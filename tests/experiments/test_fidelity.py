@@ -26,9 +26,9 @@ PLAN = FidelityPlan(n=16, epochs=2, image_px=(32, 48), workers=1, seed=5)
 
 
 def tiny_base():
-    """The plate with a few people and objects (as `sim.tiny`), full-length presses."""
-    from sim.episode import EpisodeConfig
-    from sim.gen_config import GenerateConfig
+    """The plate with a few people and objects (as `sim.generate.tiny`), full-length presses."""
+    from sim.episode.runner import EpisodeConfig
+    from sim.generate.config import GenerateConfig
 
     return GenerateConfig(
         part="plate", n_subjects=4, instances_per_kind=2, episode=EpisodeConfig(max_attempts=20)
@@ -278,7 +278,7 @@ def test_segnet_option_reports_a_mean_iou_that_pixel_counts_reproduce(run, tmp_p
     from learn.inputs import net_input
     from learn.train.checkpoint import LAST, load_checkpoint, model_from_checkpoint
     from tactile.dataset.reader import open_dataset
-    from tactile.resize import resize_labels
+    from tactile.images.resize import resize_labels
 
     out, results = run
     shutil.copytree(out / "models", tmp_path / "o" / "models")  # HandsNet reused

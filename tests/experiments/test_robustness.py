@@ -31,9 +31,9 @@ from learn.train.checkpoint import load_checkpoint, model_from_checkpoint
 from learn.train.validation import evaluate_tensors, logits_of
 from tactile import TactileMap
 from tactile.dataset import DatasetWriter, open_dataset
-from tactile.faults import blind_spots, nested_removal, zero_taxels
-from tactile.labels import label_image
-from tactile.resize import resize_labels
+from tactile.images.faults import blind_spots, nested_removal, zero_taxels
+from tactile.images.labels import label_image
+from tactile.images.resize import resize_labels
 
 GAIN, NOISE, BASE = 2.0, 4.0, 100.0  # counts/Pa, counts (sd), counts
 

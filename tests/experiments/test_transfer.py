@@ -22,7 +22,7 @@ from experiments.transfer_runs import nested_order
 from learn.train.checkpoint import load_checkpoint, model_from_checkpoint
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError
-from tactile.resize import resize_grey
+from tactile.images.resize import resize_grey
 
 SETTINGS = T.TransferSettings(
     curve_sizes=(4, 8),
@@ -57,7 +57,7 @@ def test_dataset_seeds_differ_by_role_and_follow_the_seed():
 @pytest.fixture(scope="module")
 def source(tmp_path_factory):
     """A tiny forearm dataset: the source part."""
-    from sim.generate import generate
+    from sim.generate.run import generate
 
     folder = tmp_path_factory.mktemp("source") / "forearm"
     cfg = T.generate_config("forearm", 24, T.dataset_seed(SETTINGS.seed, "source"), tiny=True)

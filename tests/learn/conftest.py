@@ -19,8 +19,8 @@ from learn.data.load import load_data
 from learn.train.loop import fit
 from tactile import TactileMap
 from tactile.dataset import DatasetWriter
-from tactile.labels import label_image
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
+from tactile.images.labels import label_image
 
 N_HAND, N_OTHER = 24, 24  # samples; 6 subjects and 6 object instances
 SIZE = (32, 48)  # network input (h, w) px in the tests

@@ -29,8 +29,8 @@ from learn.infer.predict import load_predictor
 from learn.train.loop import fit
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError
-from tactile.motion import principal_angle
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
+from tactile.prints.motion import principal_angle
 
 runner = CliRunner()
 

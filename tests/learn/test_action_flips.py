@@ -12,7 +12,7 @@ from learn.data.folder import HAND_NAMES
 from learn.data.load import TensorData
 from learn.inputs import PAPER_VIEWS, flip_view, is_mirror, mirror_classes, targets_in_view
 from learn.train.loop import get_batch
-from tactile.labels import CLASS_NAMES
+from tactile.images.labels import CLASS_NAMES
 
 ACTIONS = (
     "grasp",

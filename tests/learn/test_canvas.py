@@ -18,7 +18,7 @@ from learn.infer.predict import Predictor, predict_image, segment
 from learn.inputs import net_input, net_labels
 from tactile.config import to_dict
 from tactile.errors import ConfigError
-from tactile.resize import canvas_px, fit_canvas, resize_grey, resize_labels
+from tactile.images.resize import canvas_px, fit_canvas, resize_grey, resize_labels
 
 from .conftest import SIZE
 

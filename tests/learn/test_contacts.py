@@ -17,7 +17,7 @@ from learn.train.checkpoint import load_checkpoint, model_from_checkpoint
 from tactile import TactileMap
 from tactile.dataset import DatasetWriter
 from tactile.dataset.reader import DatasetReader
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
 
 from .conftest import GAIN, N_HAND, N_OTHER, make_sample
 

@@ -1,4 +1,4 @@
-"""TorchTactileDataset: shapes, flips, faults against tactile.faults, DataLoader workers."""
+"""TorchTactileDataset: shapes, flips, faults against tactile.images.faults, DataLoader workers."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from learn.data.dataset import FaultSpec, TorchTactileDataset
 from tactile import TactileMap, TaxelLayout, resize_image, resize_labels
 from tactile.dataset import DatasetWriter, open_dataset
 from tactile.errors import ConfigError, DataError
-from tactile.faults import (
+from tactile.geometry.synthetic import cylinder_sector_layout
+from tactile.images.faults import (
     blind_spots,
     dead_modules,
     gain_drift,
@@ -19,7 +20,6 @@ from tactile.faults import (
     stuck_at,
     zero_taxels,
 )
-from tactile.synthetic import cylinder_sector_layout
 
 N_SAMPLES = 20
 BASELINE, GAIN = 1000.0, 2.0  # counts, counts/Pa

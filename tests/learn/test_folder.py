@@ -14,7 +14,7 @@ from learn.data.load import load_data
 from learn.train.loop import fit
 from learn.train.validation import evaluate_tensors
 from tactile.errors import DataError
-from tactile.labels import PALETTE, colorize
+from tactile.images.labels import PALETTE, colorize
 
 
 @pytest.fixture

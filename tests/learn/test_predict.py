@@ -26,11 +26,11 @@ from learn.infer.predict import (
     read_sample,
     save_figures,
 )
-from sim.view_cli import load_predicted
+from sim.cli.view import load_predicted
 from tactile.dataset import DatasetWriter, open_dataset
 from tactile.errors import DataError
-from tactile.labels import N_CLASSES, backproject, part_summary
-from tactile.tactile_map import TactileMap
+from tactile.images.labels import N_CLASSES, backproject, part_summary
+from tactile.images.tactile_map import TactileMap
 
 
 @pytest.fixture(scope="module")

@@ -1,5 +1,5 @@
 """The frame path of `learn.infer.stream` and `handskin stream`, checked against the reference
-path: `tactile.TactileMap.image`, `learn.inputs.net_input`, `tactile.labels.backproject` and
+path: `tactile.TactileMap.image`, `learn.inputs.net_input`, `tactile.images.labels.backproject` and
 `learn.infer.predict.predict_frame`, on the tiny dataset's frames, over standard input and a
 loopback ZeroMQ socket."""
 
@@ -22,7 +22,7 @@ from learn.infer.stream import Recognizer
 from learn.inputs import labels_on_map, net_input
 from tactile.dataset import open_dataset
 from tactile.errors import ConfigError, DataError
-from tactile.labels import backproject
+from tactile.images.labels import backproject
 
 SIZE = (32, 48)  # the tiny checkpoints' input, px
 
@@ -73,7 +73,7 @@ def test_network_inputs_are_net_inputs(frames, canvas):
         box = pix.fill(p, image, box)
         ops.resize(image, box, resized)
         ops.keep_support(resized, ext, box, kept)
-        # exact by construction (tactile.resize.resize_grey): the same bytes on any CPU
+        # exact by construction (tactile.images.resize.resize_grey): the same bytes on any CPU
         assert np.array_equal(resized, net_input(image, SIZE, "classify", canvas))
         assert np.array_equal(kept, net_input(image, SIZE, "segment", canvas))
 

@@ -10,10 +10,14 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim import press
-from sim.bodyparts import BODY_KINDS, BODY_MODES, body_press, build_body_part, plan_body_press
-from sim.contactors import PressPlan
-from sim.nonhand import (
+from sim.contactors.bodyparts import (
+    BODY_KINDS,
+    BODY_MODES,
+    body_press,
+    build_body_part,
+    plan_body_press,
+)
+from sim.contactors.nonhand import (
     BROAD_OBJECTS,
     BROAD_SHARE,
     OBJECT_FRACTION,
@@ -21,9 +25,11 @@ from sim.nonhand import (
     mixture,
     sample_nonhand,
 )
-from sim.objects import HARD_NEGATIVES
-from sim.parts import get_part
-from sim.primitives import MATERIALS
+from sim.contactors.objects import HARD_NEGATIVES
+from sim.contactors.primitives import MATERIALS
+from sim.contactors.spec import PressPlan
+from sim.episode import press
+from sim.skin.parts import get_part
 from tactile.errors import ConfigError
 
 BODY_SHAPES = {int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_ELLIPSOID)}
@@ -79,7 +85,7 @@ def test_instances_are_deterministic(kind: str) -> None:
 
 # ANSUR II (Gordon et al. 2014, "2012 Anthropometric Survey of U.S. Army Personnel: Methods and
 # Summary Statistics", NATICK/TR-15/007): 5th percentile of the 1,986 women and 95th of the 4,082
-# men, mm, as computed from the survey's public data. sim/bodyparts.py draws "roughly the
+# men, mm, as computed from the survey's public data. sim/contactors/bodyparts.py draws "roughly the
 # 5th-percentile woman to 95th-percentile man"; "roughly" is 5 % here, and a limb's radius (or
 # half-width) is its circumference / 2 pi.
 ANSUR_II_MM = {

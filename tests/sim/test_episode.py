@@ -9,9 +9,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim import placement, press
-from sim.contactors import PressPlan, sphere_contactor
-from sim.episode import (
+from sim.contactors import placement
+from sim.contactors.spec import PressPlan, sphere_contactor
+from sim.episode import press
+from sim.episode.runner import (
     FRAME_DT_S,
     EpisodeConfig,
     EpisodeContext,
@@ -20,8 +21,8 @@ from sim.episode import (
     run_sample,
     site_pose,
 )
-from sim.parts import get_part
-from sim.skin import SkinConfig
+from sim.skin.model import SkinConfig
+from sim.skin.parts import get_part
 from tactile.dataset.schema import Dims, validate_sample
 from tactile.errors import ConfigError
 
@@ -194,8 +195,8 @@ def test_contact_on_bare_link_reads_zero(ctx):
 def test_sample_does_not_depend_on_keep_sequence():
     """Same (seed, i) with and without the sequence: the release frames are simulated after the
     selection window (load + hold), so every non-sequence field is identical."""
-    from sim.generate_hands import sample_hand
-    from sim.subjects import sample_subjects
+    from sim.contactors.subjects import sample_subjects
+    from sim.generate.hands import sample_hand
 
     forearm = EpisodeContext()
     subjects = sample_subjects(4, np.random.default_rng(0))
@@ -211,8 +212,8 @@ def test_sample_does_not_depend_on_keep_sequence():
 def test_sequence_phases_end_where_the_frames_do():
     """A kept sequence holds one 10 Hz frame per 0.1 s up to the end of its release, the last
     of the four phase ends (increasing), unless an unstable release frame cut it short."""
-    from sim.generate_hands import sample_hand
-    from sim.subjects import sample_subjects
+    from sim.contactors.subjects import sample_subjects
+    from sim.generate.hands import sample_hand
 
     forearm = EpisodeContext()
     subjects = sample_subjects(4, np.random.default_rng(0))

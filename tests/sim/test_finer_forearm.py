@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from sim.parts import FOREARM_TILING, SKIN_PITCH_MM, finer_forearm_tiling, get_part
-from sim.tiling import module_lattice
+from sim.skin.parts import FOREARM_TILING, SKIN_PITCH_MM, finer_forearm_tiling, get_part
+from sim.skin.tiling import module_lattice
 from tactile.errors import ConfigError
-from tactile.plot import coverage_mask
-from tactile.tactile_map import TactileMap
+from tactile.figures.maps import coverage_mask
+from tactile.images.tactile_map import TactileMap
 
 ROWS = {"forearm_x2": 7, "forearm_x4": 10}
 

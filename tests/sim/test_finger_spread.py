@@ -8,13 +8,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim import press
-from sim.contactors import PressPlan
-from sim.episode import CONTROL_DT_S, EpisodeContext, run_episode, site_pose
-from sim.hand_kinematics import FINGERS
-from sim.interaction_poses import finger_pose, finger_spread
-from sim.interactions import hand_contactor, joint_name, plan_hand_interaction
-from sim.subjects import FINGER_SPREAD_RANGE_DEG, Subject, sample_subjects
+from sim.contactors.hand_kinematics import FINGERS
+from sim.contactors.interaction_poses import finger_pose, finger_spread
+from sim.contactors.interactions import hand_contactor, joint_name, plan_hand_interaction
+from sim.contactors.spec import PressPlan
+from sim.contactors.subjects import FINGER_SPREAD_RANGE_DEG, Subject, sample_subjects
+from sim.episode import press
+from sim.episode.runner import CONTROL_DT_S, EpisodeContext, run_episode, site_pose
 from tactile.errors import ConfigError
 
 SUBJECT = sample_subjects(1, np.random.default_rng(4))[0]

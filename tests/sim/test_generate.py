@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim import sampler
-from sim.gen_config import GenerateConfig, load_generate_config
-from sim.generate import generate
-from sim.sampler import is_hand_index
-from sim.shards import merge_shards, parse_shard, shard_chunks
+from sim.generate import sampler
+from sim.generate.config import GenerateConfig, load_generate_config
+from sim.generate.run import generate
+from sim.generate.sampler import is_hand_index
+from sim.generate.shards import merge_shards, parse_shard, shard_chunks
 from tactile.config import to_toml
 from tactile.dataset import list_chunks, open_dataset
 from tactile.dataset.readout import NOISE_FLOOR_SIGMAS
@@ -115,7 +115,8 @@ def test_sigkill_mid_run_then_resume_equals_uninterrupted(reference: Path, tmp_p
     argv = [
         sys.executable,
         "-c",  # the generate command as `handskin generate` registers it
-        "import typer; from sim.cli import register; app = typer.Typer(); register(app); app()",
+        "import typer; from sim.cli.parts import register; "
+        "app = typer.Typer(); register(app); app()",
         "generate",
         "--out",
         str(out),
@@ -225,7 +226,7 @@ def test_cli_reports_bad_input_naming_the_flag(tmp_path: Path, flags: list[str],
     import typer
     from typer.testing import CliRunner
 
-    from sim.cli import register
+    from sim.cli.parts import register
 
     app = typer.Typer()
     register(app)
@@ -255,7 +256,7 @@ def test_ray_run_gives_the_same_bytes(reference: Path, tmp_path: Path) -> None:
 
 
 def test_contact_sheet_of_the_generated_dataset(reference: Path, tmp_path: Path) -> None:
-    from tactile.dataset.cli import select_samples, write_sheet
+    from tactile.cli.dataset import select_samples, write_sheet
 
     png = write_sheet(reference, tmp_path / "hands.png", n=4, cls="hand")
     assert png.stat().st_size > 1000
@@ -267,7 +268,7 @@ def test_contact_sheet_of_the_generated_dataset(reference: Path, tmp_path: Path)
 
 
 def test_folder_started_by_other_code_is_refused_with_the_reason(tmp_path: Path) -> None:
-    from sim.gen_config import generator_version, refuse_other_code
+    from sim.generate.config import generator_version, refuse_other_code
     from tactile.dataset.manifest import make_manifest
 
     cfg = small()
@@ -313,7 +314,7 @@ def test_the_documented_configuration_files_load(name: str) -> None:
 
 
 def test_a_size_floor_above_the_part_s_taxel_count_is_refused_before_any_work(tmp_path):
-    from sim.parts import get_part
+    from sim.skin.parts import get_part
 
     n_taxels = len(get_part("plate").layout.positions_m)
     out = tmp_path / "ds"

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim.hand import (
+from sim.contactors.hand import (
     HAND_PARTS,
     TISSUE_RATIO,
     HandConfig,
@@ -342,7 +342,7 @@ def fingertip_depth_and_width(model, data, p: str) -> tuple[float, float, float]
 @pytest.mark.parametrize("force_n", [2.0, 5.0])
 def test_fingertip_contact_patch_is_10_to_15_mm_at_moderate_force(length_m, force_n):
     # a pressed finger pad touches about 10-15 mm across at moderate force (the issue's spec);
-    # the pulp's allowance is TISSUE_RATIO["distal"] x tissue_depth_m (sim.hand), so the
+    # the pulp's allowance is TISSUE_RATIO["distal"] x tissue_depth_m (sim.contactors.hand), so the
     # capsule end sinks 2.5-3 mm
     # strongest servos: the finger holds its pose, so the patch measures the tissue alone (at
     # strength 1 the compliant index yields at 5 N and the palm reaches the plate)

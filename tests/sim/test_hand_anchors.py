@@ -5,7 +5,7 @@
 - Li, J Hand Surg Am 27(5):886-896, 2002: force sharing of the four fingers in maximal grip,
   index 32.2 ± 3.8 %, middle 32.6 ± 4.3 %, ring 23.5 ± 4.5 %, little 11.7 ± 4.9 % (mean ± SD).
 - J Hand Surg Am 2014, doi 10.1016/j.jhsa.2014.06.121: the thumb gives an estimated 17 % of grip
-  strength (no spread published; held to ± 4.9 points, Li's widest SD; `tactile.anchors`).
+  strength (no spread published; held to ± 4.9 points, Li's widest SD; `tactile.prints.anchors`).
 - Cylinder grips load the fingertips most (Kargov et al., J Med Eng Technol 30(3), 2006: the
   highest forces at the fingertips and the thumb); pushing loads the palm most (pressure mapping
   of a pushed cylinder, Work 2007: the thenar region carries the most force).
@@ -25,11 +25,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim.episode import FRAME_DT_S, EpisodeContext, episode_rng
-from sim.generate_hands import hand_maker
-from sim.subjects import sample_subjects
-from sim.view import replay_geoms
-from tactile.anchors import ANCHORS
+from sim.contactors.subjects import sample_subjects
+from sim.episode.runner import FRAME_DT_S, EpisodeContext, episode_rng
+from sim.generate.hands import hand_maker
+from sim.view.scenes import replay_geoms
+from tactile.prints.anchors import ANCHORS
 
 SEED = 11
 PARTS = ("thumb", "index", "middle", "ring", "pinkie", "palm")

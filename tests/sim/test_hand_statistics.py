@@ -14,10 +14,10 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from sim.contactors import ACTIONS
-from sim.episode import EpisodeContext
-from sim.generate_hands import sample_hand
-from sim.subjects import sample_subjects
+from sim.contactors.spec import ACTIONS
+from sim.contactors.subjects import sample_subjects
+from sim.episode.runner import EpisodeContext
+from sim.generate.hands import sample_hand
 
 N_SAMPLES, SEED = 320, 2020
 PALM = 6

@@ -9,12 +9,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim.contactors import ACTIONS, OPERATOR_POSITIONS, ROOT
-from sim.episode import EpisodeContext, run_episode
-from sim.hand import HAND_PARTS
-from sim.interactions import hand_contactor, plan_hand_interaction
-from sim.parts import get_part
-from sim.subjects import sample_subjects
+from sim.contactors.hand import HAND_PARTS
+from sim.contactors.interactions import hand_contactor, plan_hand_interaction
+from sim.contactors.spec import ACTIONS, OPERATOR_POSITIONS, ROOT
+from sim.contactors.subjects import sample_subjects
+from sim.episode.runner import EpisodeContext, run_episode
+from sim.skin.parts import get_part
 
 SUBJECTS = sample_subjects(3, np.random.default_rng(4))
 

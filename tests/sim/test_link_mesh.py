@@ -10,9 +10,9 @@ import trimesh
 import typer
 from typer.testing import CliRunner
 
-from sim.cli import register
-from sim.link_mesh import MAX_LINK_EXTENT_M, MeshRepaired, load_link_mesh
-from sim.parts import load_link_mesh as part_link_mesh
+from sim.cli.parts import register
+from sim.skin.link_mesh import MAX_LINK_EXTENT_M, MeshRepaired, load_link_mesh
+from sim.skin.parts import load_link_mesh as part_link_mesh
 from tactile.errors import ConfigError
 
 

@@ -1,5 +1,5 @@
-"""Samples of several contacts (`sim.mix`): generated end to end on the small plate, checked
-against what each sample's own fields say (its contactor list, its labels, the split), and
+"""Samples of several contacts (`sim.generate.mix`): generated end to end on the small plate,
+checked against what each sample's own fields say (its contactor list, its labels, the split), and
 against the single-contact generator they extend."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from sim.gen_config import GenerateConfig
-from sim.generate import generate
+from sim.generate.config import GenerateConfig
+from sim.generate.run import generate
 from tactile.config import override
 from tactile.dataset import open_dataset
 from tactile.errors import ConfigError

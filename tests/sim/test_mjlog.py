@@ -12,7 +12,7 @@ import pytest
 
 mujoco = pytest.importorskip("mujoco")
 
-from sim.mjlog import mujoco_warnings_logged  # noqa: E402
+from sim.episode.mjlog import mujoco_warnings_logged  # noqa: E402
 
 XML = "<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>"
 
@@ -29,7 +29,7 @@ def _warn() -> None:
 def test_warnings_go_to_the_log_and_the_hook_is_restored(tmp_path, monkeypatch, caplog, capfd):
     monkeypatch.chdir(tmp_path)
     before = mujoco.get_mju_user_warning()
-    with caplog.at_level(logging.DEBUG, logger="sim.mjlog"), mujoco_warnings_logged():
+    with caplog.at_level(logging.DEBUG, logger="sim.episode.mjlog"), mujoco_warnings_logged():
         _warn()
     assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
     assert "Nan, Inf or huge value in QPOS" in caplog.text

@@ -9,9 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim import press
-from sim.contactors import PressPlan
-from sim.objects import (
+from sim.contactors.objects import (
     HARD_NEGATIVES,
     OBJECT_KINDS,
     OBJECT_MODES,
@@ -19,9 +17,11 @@ from sim.objects import (
     object_press,
     plan_object_press,
 )
-from sim.parts import get_part
-from sim.primitives import FINGER_RADIUS_M, FINGER_SPACING_M, MATERIALS
-from sim.readout import SDF, signed_distance
+from sim.contactors.primitives import FINGER_RADIUS_M, FINGER_SPACING_M, MATERIALS
+from sim.contactors.spec import PressPlan
+from sim.episode import press
+from sim.skin.parts import get_part
+from sim.skin.readout import SDF, signed_distance
 from tactile.errors import ConfigError
 
 PRIMITIVES = {int(t) for t in SDF}
@@ -107,9 +107,9 @@ def test_instances_are_deterministic(kind: str) -> None:
     assert build_object(kind, None, 8).description != a.description
 
 
-# Published sizes of the balls sim/objects.py draws between: ITTF, The Laws of Table Tennis 2.3.1,
-# "the ball shall be spherical, with a diameter of 40mm"; IFAB, Laws of the Game, Law 2, a
-# football's circumference is 68-70 cm.
+# Published sizes of the balls sim/contactors/objects.py draws between: ITTF, The Laws of Table
+# Tennis 2.3.1, "the ball shall be spherical, with a diameter of 40mm"; IFAB, Laws of the Game, Law
+# 2, a football's circumference is 68-70 cm.
 TABLE_TENNIS_BALL_RADIUS_M = 0.040 / 2
 FOOTBALL_RADIUS_M = 0.70 / (2 * np.pi)  # the largest football, 111.4 mm
 
@@ -156,7 +156,8 @@ def parallel_rods(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("kind", HARD_NEGATIVES)
 def test_hard_negatives_have_finger_like_parallel_rods(kind: str) -> None:
     """Measured on the compiled model: the rods' spacing and half-width are the finger spacing and
-    phalanx radii that `sim.primitives` declares (those of `sim.hand_kinematics`' hands)."""
+    phalanx radii that `sim.contactors.primitives` declares (those of
+    `sim.contactors.hand_kinematics`' hands)."""
     for i in range(10):
         y, half_w = parallel_rods(build_object(kind, None, i).spec.compile())
         assert len(y) >= 2

@@ -8,15 +8,15 @@ import trimesh
 from scipy.ndimage import distance_transform_edt
 from scipy.spatial import cKDTree
 
-from sim.geometry import ForearmShape, forearm_mesh, rounded_box_mesh
-from sim.link_mesh import MeshRepaired
-from sim.parts import SKIN_PITCH_MM, W0_REGION, W0_TILING, custom_part, get_part
-from sim.tiling import Tiling, closest_on_mesh, module_pads_mm, polar_contour
+from sim.skin.geometry import ForearmShape, forearm_mesh, rounded_box_mesh
+from sim.skin.link_mesh import MeshRepaired
+from sim.skin.parts import SKIN_PITCH_MM, W0_REGION, W0_TILING, custom_part, get_part
+from sim.skin.tiling import Tiling, closest_on_mesh, module_pads_mm, polar_contour
 from tactile.errors import ConfigError
-from tactile.flatten import flatten
-from tactile.plot import coverage_mask
-from tactile.surface import triangulate
-from tactile.tactile_map import TactileMap
+from tactile.figures.maps import coverage_mask
+from tactile.geometry.flatten import flatten
+from tactile.geometry.surface import triangulate
+from tactile.images.tactile_map import TactileMap
 
 PAPER_MAP_MM = (247.0, 362.0)  # Albini & Cannata (2020): Baxter forearm map, height x width
 PALM_MM = (85.0, 95.0)  # adult palm footprint, width x length
@@ -120,7 +120,7 @@ def test_bad_tiling_and_region_raise_config_errors() -> None:
 
 
 def custom_mesh_part(tiling: Tiling):
-    from sim.parts import FOREARM_REGION, make_part
+    from sim.skin.parts import FOREARM_REGION, make_part
 
     return make_part("wide", forearm_mesh(ForearmShape()), FOREARM_REGION, tiling)
 
@@ -143,8 +143,8 @@ def test_part_command_writes_the_model_and_names_bad_flags(tmp_path):
     import typer
     from typer.testing import CliRunner
 
-    from sim.cli import register
-    from tactile.layout import TaxelLayout
+    from sim.cli.parts import register
+    from tactile.geometry.layout import TaxelLayout
 
     app = typer.Typer()
     register(app)

@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim import placement
-from sim.contactors import PressPlan
-from sim.episode import EpisodeConfig, EpisodeContext, site_pose
-from sim.geometry import ForearmShape, forearm_profile, superellipse
-from sim.interactions import MAX_GRASP_SHIFT_M, plan_hand_interaction
-from sim.nonhand import sample_nonhand
-from sim.parts import get_part
-from sim.subjects import sample_subjects
+from sim.contactors import placement
+from sim.contactors.interactions import MAX_GRASP_SHIFT_M, plan_hand_interaction
+from sim.contactors.nonhand import sample_nonhand
+from sim.contactors.spec import PressPlan
+from sim.contactors.subjects import sample_subjects
+from sim.episode.runner import EpisodeConfig, EpisodeContext, site_pose
+from sim.skin.geometry import ForearmShape, forearm_profile, superellipse
+from sim.skin.parts import get_part
 
 
 @pytest.fixture(scope="module")

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.parts import get_part
-from sim.probe import Probe, ProbeRig, calibration_curve, central_taxel, foundation_depth_m
-from sim.skin import SkinConfig, SkinInstance
+from sim.episode.probe import Probe, ProbeRig, calibration_curve, central_taxel, foundation_depth_m
+from sim.skin.model import SkinConfig, SkinInstance
+from sim.skin.parts import get_part
 from tactile.errors import ConfigError
 
 K = SkinConfig().stiffness_pa_per_m
@@ -37,8 +37,8 @@ def test_sphere_settles_at_the_foundation_depth(part_name: str, force_n: float) 
 
 
 def test_flat_punch_gives_uniform_pressure_force_over_area() -> None:
-    """Force-consistent pressure (`sim.skin`): a flat punch reads a uniform F / A under it, with
-    A the pressed taxels' area on the sensor mesh (sum(p A) = F); that area samples the punch's
+    """Force-consistent pressure (`sim.skin.model`): a flat punch reads a uniform F / A under it,
+    with A the pressed taxels' area on the sensor mesh (sum(p A) = F); that area samples the punch's
     pi r^2 (8 mm pitch, r = 25 mm, the rim and the mesh's holes at module corners: 0.84 pi r^2)."""
     cfg = SkinConfig(spread_sigma_m=0.0)
     r = rig("plate", Probe("cylinder", (0.025, 0.01)), cfg)

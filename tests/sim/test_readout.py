@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay, cKDTree
 
-from sim.geometry import plate_mesh
-from sim.parts import Part, get_part
-from sim.scene import Contactor, SkinScene
-from sim.skin import SkinConfig, SkinInstance
+from sim.episode.scene import Contactor, SkinScene
+from sim.skin.geometry import plate_mesh
+from sim.skin.model import SkinConfig, SkinInstance
+from sim.skin.parts import Part, get_part
 from tactile.errors import ConfigError
-from tactile.layout import TaxelLayout
+from tactile.geometry.layout import TaxelLayout
 
 PITCH_M = 8e-3
 
@@ -133,7 +133,7 @@ def test_attribution_picks_the_deeper_of_overlapping_contactors() -> None:
 def test_mesh_contactors_are_rejected_by_attribution() -> None:
     part = get_part("plate")
     scene = SkinScene(part)
-    from sim.readout import TaxelReadout
+    from sim.skin.readout import TaxelReadout
 
     with pytest.raises(ConfigError, match="not a supported primitive"):
         TaxelReadout(scene.model, "fa_tactile", "fa_skin", ["fa_link_collision"])

@@ -1,10 +1,10 @@
-"""The shortcut check on generated data (issue 4): simple image features must not separate hand
+"""The shortcut check on generated data: simple image features must not separate hand
 from non-hand as well as a CNN will.
 
 600 samples of the default forearm dataset (seed 11, the paper's class balance) are generated in
 memory; a logistic regression on contact area, blob count, mean intensity and bounding box
-(`sim.shortcut`) is held out by subject / instance over five splits. Measured (broad soft
-non-hand contacts, body-part tissue 6-25 mm): 0.82-0.86 per split, hand median 8,366 lit pixels
+(`learn.classical.shortcut`) is held out by subject / instance over five splits. Measured (broad
+soft non-hand contacts, body-part tissue 6-25 mm): 0.82-0.86 per split, hand median 8,366 lit pixels
 vs non-hand ~2,900; before them 0.88-0.93 (non-hand median 1,998). It must stay below 0.90 and,
 as an independent check that the features still carry signal, above the majority baseline.
 About 25 s on one core.
@@ -15,12 +15,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.gen_config import GenerateConfig
-from sim.sampler import build_state, sample_at
-from sim.shortcut import group_ids, image_features, shortcut_check
+from learn.classical.shortcut import group_ids, image_features, shortcut_check
+from sim.generate.config import GenerateConfig
+from sim.generate.sampler import build_state, sample_at
 
 N_SAMPLES, SEED, SPLITS = 600, 11, range(5)
-MAX_ACCURACY = 0.90  # issue 4: clearly worse than a CNN
+MAX_ACCURACY = 0.90  # clearly worse than a CNN
 
 
 @pytest.fixture(scope="module")

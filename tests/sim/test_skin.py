@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.skin import (
+from sim.skin.model import (
     FULL_SCALE_COUNTS,
     SkinConfig,
     SkinInstance,
@@ -17,7 +17,7 @@ from sim.skin import (
     taxel_areas_m2,
 )
 from tactile.errors import ConfigError
-from tactile.synthetic import hex_lattice_mm
+from tactile.geometry.synthetic import hex_lattice_mm
 
 
 def lattice_m(pitch_mm: float = 8.0) -> np.ndarray:

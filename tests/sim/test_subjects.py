@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.hand import HandConfig
-from sim.subjects import Subject, sample_subjects, split_subjects, truncated_normal
+from sim.contactors.hand import HandConfig
+from sim.contactors.subjects import Subject, sample_subjects, split_subjects, truncated_normal
 from tactile.errors import ConfigError
 
 

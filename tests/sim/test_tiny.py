@@ -1,12 +1,12 @@
-"""`sim.tiny`: a handful of labelled samples in memory, both classes, reproducible — and the
-docstring's example pipeline test, run as written. Its speed: benchmarks/bench_generate.py."""
+"""`sim.generate.tiny`: a handful of labelled samples in memory, both classes, reproducible — and
+the docstring's example pipeline test, run as written. Its speed: benchmarks/bench_generate.py."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from sim.tiny import tiny_map, tiny_samples
+from sim.generate.tiny import tiny_map, tiny_samples
 from tactile.dataset.schema import Dims, validate_sample
 from tactile.errors import ConfigError
 

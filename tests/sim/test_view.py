@@ -11,10 +11,10 @@ import typer
 from PIL import Image
 from typer.testing import CliRunner
 
-from sim.render import geom_mesh, render_scene
-from sim.tiny import tiny_config
-from sim.view import GeomShape, simulate_scene
-from sim.view_cli import register, simulated
+from sim.cli.view import register, simulated
+from sim.generate.tiny import tiny_config
+from sim.view.render import geom_mesh, render_scene
+from sim.view.scenes import GeomShape, simulate_scene
 
 SIZE_PX = (320, 160)  # (width, height) of the test renders, pixels
 CAPTION_PX = 20  # rows of the captions at the top of a 160-pixel-high render
@@ -183,7 +183,8 @@ def test_view_command_names_a_bad_sample(tmp_path: Path):
 
 
 def test_the_command_offers_the_renderers_colours():
-    """`sim.view_cli` spells the colour choices out (importing `sim.render` loads pyvista)."""
-    from sim import render, view_cli
+    """`sim.cli.view` spells the colour choices out (importing `sim.view.render` loads pyvista)."""
+    from sim.cli import view as view_cli
+    from sim.view import render
 
     assert view_cli.COLORS == render.COLORS

@@ -21,23 +21,24 @@ from typer.testing import CliRunner
 pytest.importorskip("mujoco_warp", reason="the warp extra is not installed")
 
 from handskin.cli import app
-from sim.contactors import sphere_contactor
-from sim.episode import episode_rng
-from sim.gen_config import MixConfig, load_generate_config
-from sim.generate import generate
-from sim.sampler import build_state, is_hand_index, maker_at
-from sim.warp_options import WarpOptions, check_warp
+from sim.contactors.spec import sphere_contactor
+from sim.episode.runner import episode_rng
+from sim.generate.config import MixConfig, load_generate_config
+from sim.generate.run import generate
+from sim.generate.sampler import build_state, is_hand_index, maker_at
+from sim.warp.options import WarpOptions, check_warp
 from tactile.dataset import open_dataset
 from tactile.dataset.manifest import claim_folder, make_manifest
 from tactile.errors import ConfigError, DataError
-from tactile.prints import bootstrap_mean, read_prints
+from tactile.prints.measures import bootstrap_mean, read_prints
 
 check_warp(WarpOptions())  # quiet warp before the modules below start it
 
-from sim import warp_backend  # noqa: E402
-from sim.warp_batch import run_batch  # noqa: E402
-from sim.warp_jobs import JobMaker  # noqa: E402
-from sim.warp_model import BATCHABLE, batch_models, convert, structure_digest  # noqa: E402
+from sim.warp import backend as warp_backend  # noqa: E402
+from sim.warp.batch import run_batch  # noqa: E402
+from sim.warp.jobs import JobMaker  # noqa: E402
+from sim.warp.model import BATCHABLE, batch_models, convert, structure_digest  # noqa: E402
+from sim.warp.run import generate as warp_generate  # noqa: E402
 
 # The CI scale of tests/sim/test_generate.py: 12 plate samples, short presses.
 SMALL = {
@@ -92,14 +93,16 @@ def test_options_are_checked_before_any_work(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"--device cuda:7 is not available; warp sees cpu"):
         check_warp(WarpOptions(device="cuda:7"))
     with pytest.raises(ConfigError, match=r"need --backend warp"):
-        generate(small(), tmp_path / "a", warp=WarpOptions(), progress=False)
+        warp_generate(small(), tmp_path / "a", warp=WarpOptions(), progress=False)
     with pytest.raises(ConfigError, match=r"--ray runs the C backend only"):
         generate(small(backend="warp"), tmp_path / "b", ray="local", progress=False)
+    with pytest.raises(ConfigError, match=r"backend = 'warp' runs through sim.warp.run.generate"):
+        generate(small(backend="warp"), tmp_path / "b", progress=False)
     with pytest.raises(ConfigError, match=r"backend = 'jax' unknown; choose one of mujoco, warp"):
         small(backend="jax")
     mixed = replace(small(backend="warp", split="keyed"), mix=MixConfig(fraction=0.5))
     with pytest.raises(ConfigError, match=r"\[mix\] fraction > 0 .* runs on the C backend only"):
-        generate(mixed, tmp_path / "c", progress=False)
+        warp_generate(mixed, tmp_path / "c", progress=False)
     assert not any((tmp_path / x).exists() for x in "abc")
 
 
@@ -156,7 +159,8 @@ def test_a_folder_of_one_backend_is_never_resumed_by_the_other(tmp_path, first, 
     claim_folder(tmp_path, make_manifest(cfg, cfg.part_id(), "v", cfg.seed))
     before = sorted(p.name for p in tmp_path.iterdir())
     with pytest.raises(DataError, match=rf"generated with --backend {first}.*never mixed"):
-        generate(small(backend=second), tmp_path, workers=1, progress=False)
+        run = warp_generate if second == "warp" else generate
+        run(small(backend=second), tmp_path, workers=1, progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
@@ -219,7 +223,7 @@ def test_a_world_does_not_depend_on_its_batch(state) -> None:
 @pytest.fixture(scope="module")
 def warp_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("warp") / "ds"
-    generate(small(backend="warp"), out, workers=1, progress=False, warp=WarpOptions(worlds=8))
+    warp_generate(small(backend="warp"), out, workers=1, progress=False, warp=WarpOptions(worlds=8))
     return out
 
 
@@ -233,7 +237,7 @@ def c_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.mark.slow
 def test_same_bytes_for_any_worlds_and_workers(warp_run: Path, tmp_path: Path) -> None:
     opts = WarpOptions(worlds=2, nconmax=96, njmax=320)
-    generate(small(backend="warp"), tmp_path / "w", workers=2, progress=False, warp=opts)
+    warp_generate(small(backend="warp"), tmp_path / "w", workers=2, progress=False, warp=opts)
     assert sha256(tmp_path / "w" / "dataset.h5") == sha256(warp_run / "dataset.h5")
 
 

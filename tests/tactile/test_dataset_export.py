@@ -9,9 +9,9 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from tactile import PALETTE, TactileMap
+from tactile.cli.dataset import register
 from tactile.dataset import DatasetWriter, export_png, open_dataset
-from tactile.dataset.cli import register
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
 
 ACTIONS = ["grasp", "side touch"]
 

@@ -11,7 +11,7 @@ import pytest
 from tactile import TactileMap, TaxelLayout
 from tactile.dataset import ingest_recording, open_dataset
 from tactile.errors import DataError
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
 
 T = 6
 EXTRA_CHANNELS = 8  # channels of the raw frame that no taxel reads

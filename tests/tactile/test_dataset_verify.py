@@ -16,12 +16,12 @@ from typer.testing import CliRunner
 
 import tactile.dataset.h5io as h5io
 from tactile import TactileMap
+from tactile.cli.dataset import register
 from tactile.dataset import DatasetWriter, open_dataset
-from tactile.dataset.cli import register
 from tactile.dataset.merge import merge_chunks
 from tactile.dataset.verify import verify_dataset
 from tactile.errors import DataError
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
 
 N = 8  # samples: hands (even, subjects 0..3) and objects (odd, instances 0..3)
 

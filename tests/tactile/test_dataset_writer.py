@@ -23,7 +23,7 @@ from tactile.dataset import (
     validate_sample,
 )
 from tactile.errors import DataError
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
 
 CHUNKS = ((0, 7), (7, 14), (14, 20))  # sample ranges of the 3 chunks
 SEQ_LEN = 4

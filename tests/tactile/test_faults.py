@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from tactile.errors import ConfigError
-from tactile.faults import (
+from tactile.geometry.synthetic import hex_lattice_mm
+from tactile.images.faults import (
     blind_spots,
     dead_modules,
     gain_drift,
@@ -16,7 +17,6 @@ from tactile.faults import (
     stuck_at,
     zero_taxels,
 )
-from tactile.synthetic import hex_lattice_mm
 
 UV = hex_lattice_mm(120.0, 200.0, 11.0)  # (N, 2) taxel uv, mm
 

@@ -9,7 +9,7 @@ import pytest
 from PIL import Image
 
 from tactile.errors import MapError
-from tactile.figures import (
+from tactile.figures.panels import (
     error_picture,
     figure_to_array,
     part_bars_figure,
@@ -19,8 +19,8 @@ from tactile.figures import (
     sequence_strip,
     trim_background,
 )
-from tactile.synthetic import cylinder_sector_layout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.synthetic import cylinder_sector_layout
+from tactile.images.tactile_map import TactileMap
 
 
 def assert_not_blank(rgb: np.ndarray, min_fraction: float = 0.02) -> None:

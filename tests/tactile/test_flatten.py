@@ -9,13 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tactile.distortion import signed_areas
 from tactile.errors import MapError
-from tactile.flatten import flatten
-from tactile.layout import TaxelLayout
-from tactile.seams import boundary_loops, face_components
-from tactile.surface import SurfaceMesh, triangulate
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.distortion import signed_areas
+from tactile.geometry.flatten import flatten
+from tactile.geometry.layout import TaxelLayout
+from tactile.geometry.seams import boundary_loops, face_components
+from tactile.geometry.surface import SurfaceMesh, triangulate
+from tactile.geometry.synthetic import cylinder_sector_layout
 
 PITCH_MM = 11.0
 ROW_MM = PITCH_MM * np.sqrt(3.0) / 2.0

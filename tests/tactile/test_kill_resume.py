@@ -20,7 +20,7 @@ import pytest
 from tactile import TactileMap
 from tactile.dataset import DatasetWriter, export_png
 from tactile.dataset.merge import merge_chunks
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
 
 ROOT = Path(__file__).resolve().parents[2]
 N, PER_CHUNK = 240, 20  # noise images of 240 x 360 px: seconds to merge and to export

@@ -7,7 +7,8 @@ import pytest
 from scipy.spatial import Delaunay
 
 from tactile.errors import MapError
-from tactile.labels import (
+from tactile.geometry.synthetic import cylinder_sector_layout
+from tactile.images.labels import (
     CLASS_NAMES,
     PALETTE,
     PartSummary,
@@ -16,9 +17,8 @@ from tactile.labels import (
     label_image,
     part_summary,
 )
-from tactile.resize import resize_labels
-from tactile.synthetic import cylinder_sector_layout
-from tactile.tactile_map import TactileMap
+from tactile.images.resize import resize_labels
+from tactile.images.tactile_map import TactileMap
 
 
 @pytest.fixture(scope="module")
@@ -134,7 +134,7 @@ def test_resize_labels_nearest_keeps_classes() -> None:
 
 def _label_image_all_classes(tmap, p, labels, erode_px=2, dilate_px=4):
     """Reference: every class field at full size, dilated, arg-max where the image is lit."""
-    from tactile import morphology
+    from tactile.images import morphology
 
     image = tmap.image(p, erode_px=erode_px, dilate_px=dilate_px)
     fields = np.where(labels[None, :] == np.arange(7)[:, None], p[None, :], 0.0)
@@ -162,7 +162,7 @@ def test_contact_instances_groups_by_gap_orders_by_load_and_drops_noise():
     """Three pressed groups on a line (taxels 10 mm apart in each, groups 80 mm apart) and a
     lone taxel: a chain of 10 mm steps is one contact, 80 mm is a gap, the lone taxel is noise;
     contacts are numbered by summed pressure."""
-    from tactile.labels import contact_instances
+    from tactile.images.labels import contact_instances
 
     x = np.concatenate([np.arange(4) * 0.01, 0.11 + np.arange(5) * 0.01, [0.30]])
     positions = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from tactile.errors import LayoutError, MapError
-from tactile.layout import TaxelLayout
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.layout import TaxelLayout
+from tactile.geometry.synthetic import cylinder_sector_layout
 
 SUMMARY_FILES = [
     "left_arm",

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from skimage.morphology import dilation, disk, erosion
 
-from tactile import morphology
 from tactile.errors import MapError
+from tactile.images import morphology
 
 SHAPES = [(1, 1), (1, 9), (3, 3), (5, 7), (9, 2), (40, 33)]
 

@@ -1,6 +1,6 @@
-"""A print's motion in the hand's axes (`tactile.motion`), against fields moved by known amounts:
-an elongated Gaussian print shifted and turned on a flat grid of taxels, and a label image whose
-palm and fingers lie along a known direction."""
+"""A print's motion in the hand's axes (`tactile.prints.motion`), against fields moved by known
+amounts: an elongated Gaussian print shifted and turned on a flat grid of taxels, and a label image
+whose palm and fingers lie along a known direction."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from tactile.motion import FINGERS, PALM, hand_axis, print_motion
-from tactile.tactile_map import TactileMap
+from tactile.images.tactile_map import TactileMap
+from tactile.prints.motion import FINGERS, PALM, hand_axis, print_motion
 
 STEP_MM = 4.0
 

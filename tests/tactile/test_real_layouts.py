@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tactile.layout import TaxelLayout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.layout import TaxelLayout
+from tactile.images.tactile_map import TactileMap
 
 ICUB_FILES = sorted(
     (Path(__file__).resolve().parents[2].parent / "shared/data/icub_skin/positions").glob("*.txt")

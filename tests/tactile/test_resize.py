@@ -1,5 +1,5 @@
-"""`tactile.resize.resize_grey`, the network's view of a tactile image, against skimage's resize
-(its slow reference, within the stated rounding of the weights) and against exact rational
+"""`tactile.images.resize.resize_grey`, the network's view of a tactile image, against skimage's
+resize (its slow reference, within the stated rounding of the weights) and against exact rational
 arithmetic (its sums are exact, so no CPU, BLAS or order of summation can change its bytes)."""
 
 from __future__ import annotations
@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from tactile.errors import ConfigError
-from tactile.resize import WEIGHT_BITS, resize_grey, resize_image, resize_labels, resize_operator
+from tactile.images.resize import (
+    WEIGHT_BITS,
+    resize_grey,
+    resize_image,
+    resize_labels,
+    resize_operator,
+)
 
 
 def grey_image(shape=(61, 97), seed=0) -> np.ndarray:

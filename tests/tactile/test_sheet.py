@@ -9,8 +9,8 @@ import pytest
 from matplotlib.image import imread
 
 from tactile.errors import MapError
-from tactile.labels import PALETTE
-from tactile.sheet import overlay, save_contact_sheet
+from tactile.figures.sheet import overlay, save_contact_sheet
+from tactile.images.labels import PALETTE
 
 
 def test_overlay_colours_labelled_pixels_and_keeps_grey_elsewhere():

@@ -14,12 +14,12 @@ from typer.testing import CliRunner
 
 from handskin.cli import app
 from tactile import TactileMap
-from tactile.anchors import ANCHORS
 from tactile.dataset import DatasetWriter, open_dataset
 from tactile.dataset.ingest import ingest_recording
-from tactile.prints import bootstrap_mean, bootstrap_share, contactor_columns, read_prints
-from tactile.stats import MISSING, dataset_stats, stats_markdown
-from tactile.synthetic import cylinder_sector_layout
+from tactile.geometry.synthetic import cylinder_sector_layout
+from tactile.prints.anchors import ANCHORS
+from tactile.prints.measures import bootstrap_mean, bootstrap_share, contactor_columns, read_prints
+from tactile.prints.stats import MISSING, dataset_stats, stats_markdown
 
 runner = CliRunner()
 ACTIVE_PA = 500.0

@@ -10,10 +10,10 @@ import pytest
 from scipy.spatial import Delaunay
 
 from tactile.errors import MapError
-from tactile.layout import TaxelLayout
-from tactile.surface import triangulate
-from tactile.synthetic import cylinder_sector_layout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.layout import TaxelLayout
+from tactile.geometry.surface import triangulate
+from tactile.geometry.synthetic import cylinder_sector_layout
+from tactile.images.tactile_map import TactileMap
 
 PITCH_MM = 11.0
 
@@ -124,7 +124,7 @@ def _flat_module_plate(round_trip: bool) -> np.ndarray:
     """iCub-style modules on a plane at z = 0, (384, 3) m: every module has rows of 3 and 4
     exactly collinear pads. round_trip: positions moved 0.1 m away and back (a frame change), so
     rows stay collinear to within rounding (what made the old code emit zero-area triangles)."""
-    from sim.tiling import Tiling
+    from sim.skin.tiling import Tiling
 
     flat_mm, _, _ = Tiling(4, 8, col_pitch_mm=20.7, row_pitch_mm=35.9).flat()
     xy = flat_mm * 1e-3

@@ -11,9 +11,9 @@ from scipy.spatial import Delaunay
 from skimage.morphology import dilation, disk, erosion
 
 from tactile.errors import MapError
-from tactile.resize import resize_image
-from tactile.synthetic import cylinder_sector_layout
-from tactile.tactile_map import TactileMap
+from tactile.geometry.synthetic import cylinder_sector_layout
+from tactile.images.resize import resize_image
+from tactile.images.tactile_map import TactileMap
 
 
 def flat_forearm(**kw: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,0 +1,1 @@
+"""The `handskin` commands of sim/: `part`, `probe`, `assets`, `generate`, `merge`, `view`."""
