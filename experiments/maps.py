@@ -21,9 +21,9 @@ import numpy as np
 from tactile.errors import ConfigError
 from tactile.geometry.layout import TaxelLayout
 from tactile.images import raster
+from tactile.images.labels import IGNORE
 from tactile.images.tactile_map import TactileMap
 
-IGNORE = 255  # label of pixels that are not counted
 SEAM_AREA_RATIO = 4.0  # a triangle whose full-map area differs more than this spans a seam
 
 

@@ -21,6 +21,7 @@ from learn.cli.options import (
     hand_classes,
     opt,
 )
+from tactile.dataset.boxes import is_box_folder
 from tactile.errors import ConfigError, HandskinError, require_folder
 from tactile.files import os_error_text, require_writable
 
@@ -41,11 +42,20 @@ def evaluate_command(
     int8: opt(
         bool, "Also score each HandsNet as int8 (calibrated on DATASET's train split).", "--int8"
     ) = False,
+    negatives: opt(
+        Path | None,
+        "Real box folders: the simulated dataset whose test non-hands a classifier is scored on "
+        "(default: the dataset it was trained on).",
+    ) = None,
     time_runs: opt(int, "Timed batch-1 runs per inference path and round (count).") = 100,
     time_rounds: opt(int, "Rounds in which a network's inference paths take turns (count).") = 3,
     progress: ProgressOpt = True,
 ) -> None:
-    """Score checkpoints on DATASET's test split beside the paper's Tables 3 and 8."""
+    """Score checkpoints on DATASET's test split beside the paper's Tables 3 and 8.
+
+    Given a folder of real box-labelled prints (handskin ingest-boxes), score them there
+    instead: a classifier's hand recall beside its specificity on simulated non-hands, a
+    segmenter's part localisation in the real boxes and their IoU, and a picture (<out>.png)."""
     # optional: torch (the learn extra)
     from learn.classical.run import evaluate_classical
     from learn.classical.svm import load_npz
@@ -54,6 +64,8 @@ def evaluate_command(
     from learn.infer.fastpath import check_timing
     from learn.train.checkpoint import versions
 
+    if is_box_folder(data):
+        return real_command(data, checkpoints, out, negatives)
     hand = hand_classes(hand_names)
     timing = {"threads": threads, "time_runs": time_runs, "time_rounds": time_rounds}
     try:
@@ -80,6 +92,30 @@ def evaluate_command(
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         write_report(rows, out, header)
+    except OSError as err:
+        raise fail(ValueError(os_error_text(err))) from err
+    typer.echo(f"report written to {out}")
+
+
+def real_command(data: Path, checkpoints: list[Path], out: Path, negatives: Path | None) -> None:
+    """`handskin evaluate` on a folder of real box-labelled prints (`learn.evaluate.real`)."""
+    from learn.evaluate.real import evaluate_real, real_picture, write_real_report  # torch
+
+    try:
+        require_folder(out.parent, "--out", "give a file path in a folder")
+        require_writable(out, "--out")
+        if negatives is not None:
+            check_data(negatives)
+        rows, predictions = evaluate_real(data, checkpoints, negatives)
+    except (HandskinError, KeyError) as err:
+        raise fail(err) from err
+    words = ["handskin", "evaluate", str(data), *map(str, checkpoints), "--out", str(out)]
+    words += ["--negatives", str(negatives)] if negatives is not None else []
+    header = f"Regenerate: `{shlex.join(words)}`\n\nReal prints: `{data}`; part labels box-derived."
+    try:
+        write_real_report(rows, out, header)
+        if predictions is not None:
+            real_picture(data, predictions, out.with_suffix(".png"))
     except OSError as err:
         raise fail(ValueError(os_error_text(err))) from err
     typer.echo(f"report written to {out}")

@@ -20,10 +20,12 @@ import torch
 from torch.utils.data import Dataset
 from tqdm.auto import tqdm
 
+from learn.data.boxes import BoxFolderDataset
 from learn.data.dataset import TorchTactileDataset
 from learn.data.folder import HAND_NAMES, FolderDataset
 from learn.data.sequences import SequenceDataset
 from learn.inputs import mirror_classes
+from tactile.dataset.boxes import is_box_folder
 from tactile.dataset.reader import DATASET, DatasetReader
 from tactile.dataset.splits import split_indices
 from tactile.errors import ConfigError, DataError
@@ -89,6 +91,8 @@ def open_split(
             "recordings as a dataset (handskin ingest, with the part's layout), or use a model "
             "without canvas_mm"
         )
+    if is_box_folder(path):
+        return BoxFolderDataset(path, split, task, size, False, seed=seed)
     return FolderDataset(path, split, task, size, False, hand_classes, seed=seed)
 
 
@@ -100,7 +104,7 @@ def is_dataset(path: str | Path) -> bool:
 
 def group_ids(ds: Dataset) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
     """(class, subject_id, instance_id) per sample of ``ds`` (None where unknown)."""
-    if isinstance(ds, FolderDataset):
+    if isinstance(ds, FolderDataset | BoxFolderDataset):
         return ds.targets[ds.indices], None, None
     reader: DatasetReader = ds.reader
     idx = np.sort(ds.indices)
@@ -122,7 +126,7 @@ def subset(ds: Dataset, positions: np.ndarray) -> Dataset:
 def split_method(ds: Dataset) -> str:
     """The train/test split method of ``ds``'s dataset (``tactile.dataset.splits.METHODS``):
     its ``split_method`` attr, "greedy" for older datasets and image folders."""
-    if isinstance(ds, FolderDataset):
+    if isinstance(ds, FolderDataset | BoxFolderDataset):
         return "greedy"
     return str(ds.reader.attrs.get("split_method", "greedy"))
 
@@ -187,7 +191,7 @@ def check_classes(ds: Dataset, path: Path) -> None:
     cls = group_ids(ds)[0]
     present = np.unique(cls) if cls is not None and len(cls) else np.zeros(0)
     if len(present) < 2:
-        names = ds.class_names if isinstance(ds, FolderDataset) else HAND_NAMES
+        names = ds.class_names if isinstance(ds, FolderDataset | BoxFolderDataset) else HAND_NAMES
         held = ", ".join(names[int(c)] for c in present) or "no sample"
         raise DataError(
             f"{path}: its train split holds {held} only; a classifier needs two classes or more. "

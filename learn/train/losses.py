@@ -14,6 +14,7 @@ from torch import nn
 
 from learn.config import LOSSES
 from tactile.errors import ConfigError, DataError
+from tactile.images.labels import IGNORE
 
 
 def class_pixel_counts(
@@ -22,16 +23,19 @@ def class_pixel_counts(
     """Pixel counts for median-frequency balancing, over label images ``(H, W)`` (or batches).
 
     Returns ``(class_pixels, image_pixels)``, both ``(num_classes,)`` int64: the pixels of each
-    class, and the total pixels of the images in which that class appears (Eigen & Fergus).
+    class, and the total pixels of the images in which that class appears (Eigen & Fergus);
+    `IGNORE` pixels (box-derived labels that no box names) count in neither.
     """
     class_pixels = np.zeros(num_classes, np.int64)
     image_pixels = np.zeros(num_classes, np.int64)
     for label in labels:
         arr = np.asarray(label)
         batch = arr.reshape(-1, arr.shape[-2] * arr.shape[-1]) if arr.ndim >= 2 else arr[None]
-        if batch.size and (batch.min() < 0 or batch.max() >= num_classes):
-            raise DataError(f"label ids must lie in 0..{num_classes - 1}; got {batch.max()}")
+        kept = batch[batch != IGNORE]
+        if kept.size and (kept.min() < 0 or kept.max() >= num_classes):
+            raise DataError(f"label ids must lie in 0..{num_classes - 1}; got {kept.max()}")
         for img in batch:
+            img = img[img != IGNORE]
             counts = np.bincount(img, minlength=num_classes)
             class_pixels += counts
             image_pixels += np.where(counts > 0, img.size, 0)
@@ -60,9 +64,10 @@ def weighted_cross_entropy(
     logits: torch.Tensor,
     target: torch.Tensor,
     weights: torch.Tensor | Sequence[float] | None = None,
-    ignore_index: int = -100,
+    ignore_index: int = IGNORE,
 ) -> torch.Tensor:
-    """Class-weighted cross-entropy: ``Σ w[y]·(−log softmax[y]) / Σ w[y]`` (scalar).
+    """Class-weighted cross-entropy: ``Σ w[y]·(−log softmax[y]) / Σ w[y]`` (scalar), over the
+    targets that are not ``ignore_index``.
 
     logits : ``(B, C)`` or ``(B, C, H, W)``; target : ``(B,)`` or ``(B, H, W)`` int64 class ids.
     """
@@ -82,10 +87,13 @@ def soft_dice_loss(
     logits : ``(B, C, H, W)``; target : ``(B, H, W)`` int64. Sums run over the batch and pixels
     per class; ``p`` is the softmax, ``g`` the one-hot target; ``ε`` (pixels) smooths empty
     classes (absent in both prediction and target count as a perfect match). ``generalized``
-    weights classes by ``1 / (Σ g)²`` as Sudre et al. (2017) do (MATLAB's Dice layer).
+    weights classes by ``1 / (Σ g)²`` as Sudre et al. (2017) do (MATLAB's Dice layer). `IGNORE`
+    pixels count in no sum.
     """
-    probs = logits.softmax(dim=1)
-    onehot = nn.functional.one_hot(target, logits.shape[1]).movedim(-1, 1).to(probs.dtype)
+    valid = (target != IGNORE).unsqueeze(1)
+    probs = logits.softmax(dim=1) * valid
+    onehot = nn.functional.one_hot(target.where(valid[:, 0], 0), logits.shape[1])
+    onehot = onehot.movedim(-1, 1).to(probs.dtype) * valid
     dims = (0, *range(2, logits.ndim))
     inter = (probs * onehot).sum(dims)
     total = probs.sum(dims) + onehot.sum(dims)

@@ -17,6 +17,7 @@ from learn.data.load import TensorData
 from learn.inputs import unpressed_as_background
 from learn.numerics import flushing
 from learn.train.device import device_of
+from tactile.images.labels import IGNORE
 
 
 @dataclass
@@ -75,7 +76,7 @@ def evaluate_tensors(
         x, y = data.x[i : i + batch_size], data.y[i : i + batch_size]
         out = logits_of(model, x, batch_size)
         pred = out.argmax(1) if y.ndim == 1 else unpressed_as_background(out.argmax(1), x)
-        cms.append(M.confusion_matrix(y, pred, num_classes))
+        cms.append(M.confusion_matrix(y, pred, num_classes, ignore_index=IGNORE))
         if keep_predictions:
             preds.append(pred)
         if loss_fn is not None:

@@ -10,12 +10,13 @@ from typing import Annotated
 import numpy as np
 import typer
 
+from tactile.dataset.boxes import ingest_boxes, parse_frame
 from tactile.dataset.export import export_png
 from tactile.dataset.ingest import ingest_recording
 from tactile.dataset.reader import open_dataset
 from tactile.dataset.verify import verify_dataset
 from tactile.errors import DataError, HandskinError, require_positive
-from tactile.files import require_writable
+from tactile.files import require_output, require_writable
 
 CLASSES = ("hand", "non_hand")
 
@@ -47,7 +48,7 @@ def export_command(
 
     OUT must be new, empty, or an export of the same dataset (then resumed, files kept)."""
     try:
-        require_writable(out, "--out", folder=True)
+        require_output(out, "--out", reads=[dataset_dir], folder=True)
         written = export_png(dataset_dir, out, progress=progress)
     except HandskinError as err:
         _fail(err)
@@ -103,7 +104,8 @@ def ingest_command(
     try:
         require_positive("--step-mm", step_mm, "mm/pixel")
         require_positive("--counts-per-pa", counts_per_pa, "counts/Pa")
-        require_writable(out, "--out", folder=True)
+        inputs = [layout, frames, labels, part_labels, baseline]
+        require_output(out, "--out", reads=inputs, folder=True, makes="dataset")
         path = ingest_recording(
             layout,
             frames,
@@ -224,7 +226,7 @@ def sheet_command(
     try:
         if n < 1:
             raise DataError(f"--n {n} is out of range; allowed >= 1")
-        require_writable(png, "--png")
+        require_output(png, "--png", reads=[dataset_dir], suffixes=(".png",))
         path = write_sheet(dataset_dir, png, n, cls=cls, action=action, subject=subject)
     except HandskinError as err:
         _fail(err)
@@ -264,9 +266,47 @@ def verify_command(
     typer.echo(f"{where}: no fault found")
 
 
+def ingest_boxes_command(
+    folder: Annotated[
+        Path,
+        typer.Argument(
+            metavar="FOLDER",
+            help="Box-labelled prints: images/ and labels/ (YOLO .txt: class cx cy w h, "
+            "normalised), e.g. ../shared/data/real_hands/fold1.",
+        ),
+    ],
+    out: Annotated[Path, typer.Option(help="Output folder (new or empty).")],
+    classes: Annotated[
+        str | None,
+        typer.Option(
+            help="The label files' class names in order, comma-separated (default: the "
+            "folder's data.yaml), e.g. palm,thumb,index,middle,ring,pinkie."
+        ),
+    ] = None,
+    frame: Annotated[
+        str | None,
+        typer.Option(
+            help="The images' native frame, ROWSxCOLUMNS px at 1 mm, that each stretched image "
+            "is resized back to, e.g. 247x362 (default: as stored)."
+        ),
+    ] = None,
+) -> None:
+    """Copy real box-labelled prints into a folder that describes itself: images in their native
+    frame, the label files, and a data.yaml with the part names, the frame and labels_from:
+    boxes. handskin train, evaluate and stats read it without further flags."""
+    try:
+        require_writable(out, "--out", folder=True)
+        names = [c.strip() for c in classes.split(",")] if classes else None
+        path = ingest_boxes(folder, out, names, parse_frame(frame))
+    except HandskinError as err:
+        _fail(err)
+    typer.echo(f"box folder written to {path} ({len(list((path / 'images').iterdir()))} prints)")
+
+
 def register(app: typer.Typer) -> None:
-    """Add `export`, `ingest`, `sheet` and `verify` to the `handskin` app."""
+    """Add `export`, `ingest`, `ingest-boxes`, `sheet` and `verify` to the `handskin` app."""
     app.command("export")(export_command)
     app.command("ingest")(ingest_command)
+    app.command("ingest-boxes")(ingest_boxes_command)
     app.command("sheet")(sheet_command)
     app.command("verify")(verify_command)

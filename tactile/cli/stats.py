@@ -8,9 +8,19 @@ from typing import Annotated
 
 import typer
 
+from tactile.dataset.boxes import CONTACT_LEVEL, BoxFolder, is_box_folder, parse_frame
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, DataError, HandskinError
-from tactile.files import require_writable, write_text_atomic
+from tactile.files import require_output, write_text_atomic
+from tactile.prints.shapes import (
+    MIN_BLOB_PX,
+    STATISTICS,
+    Shapes,
+    dataset_shapes,
+    folder_shapes,
+    quartiles,
+    shapes_markdown,
+)
 from tactile.prints.stats import dataset_stats, stats_markdown, summary_lines
 
 NEEDED = ("pressure_pa", "image")  # fields every statistic needs (raw is always there)
@@ -35,14 +45,11 @@ def check_dataset(path: Path, what: str) -> int:
     return n
 
 
-def check_outputs(out: Path | None, png: Path | None) -> None:
-    """ConfigError before any work: an unwritable ``--out``/``--png``, or ``--png`` not .png."""
-    if out is not None:
-        require_writable(out, "--out")
-    if png is not None:
-        if png.suffix.lower() != ".png":
-            raise ConfigError(f"--png {png}: not a .png file. Fix: e.g. --png {png.stem}.png")
-        require_writable(png, "--png")
+def check_outputs(out: Path | None, png: Path | None, reads: list[Path] = ()) -> None:
+    """ConfigError before any work: ``--out`` (.md) and ``--png`` (.png) that cannot be written or
+    would write over a file the command ``reads`` (`tactile.files.require_output`)."""
+    require_output(out, "--out", reads=reads, suffixes=(".md",))
+    require_output(png, "--png", reads=reads, suffixes=(".png",))
 
 
 def names_of(paths: list[Path]) -> list[str]:
@@ -56,11 +63,14 @@ def names_of(paths: list[Path]) -> list[str]:
 def stats_command(
     dataset: Annotated[
         Path,
-        typer.Argument(metavar="DATASET", help="Dataset folder (or its dataset.h5)."),
+        typer.Argument(
+            metavar="DATASET",
+            help="Dataset folder (or its dataset.h5), or a folder of box-labelled real prints.",
+        ),
     ],
     dataset2: Annotated[
         Path | None,
-        typer.Argument(metavar="DATASET2", help="A second dataset, shown beside the first."),
+        typer.Argument(metavar="DATASET2", help="A second one, shown beside the first."),
     ] = None,
     out: Annotated[
         Path | None, typer.Option(help="Markdown report to write (.md): every table.")
@@ -70,6 +80,26 @@ def stats_command(
         typer.Option(help="PNG of the distributions, part shares and anchored figures."),
     ] = None,
     seed: Annotated[int, typer.Option(help="Seed of the bootstrap (integer >= 0).")] = 0,
+    classes: Annotated[
+        str | None,
+        typer.Option(
+            help="Box folders: the label files' class names in order, comma-separated "
+            "(default: the folder's data.yaml), e.g. palm,thumb,index,middle,ring,pinkie."
+        ),
+    ] = None,
+    frame: Annotated[
+        str | None,
+        typer.Option(
+            help="Box folders: the images' native frame, ROWSxCOLUMNS px at 1 mm, that each "
+            "stretched image is resized back to, e.g. 247x362 (default: as stored)."
+        ),
+    ] = None,
+    level: Annotated[
+        int, typer.Option(help="Print shapes: contact is a grey level above this (0..254).")
+    ] = CONTACT_LEVEL,
+    min_blob_px: Annotated[
+        int, typer.Option(help="Print shapes: blobs of fewer pixels are specks (>= 1).")
+    ] = MIN_BLOB_PX,
     progress: Annotated[
         bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")
     ] = True,
@@ -83,14 +113,23 @@ def stats_command(
     in grip, Li 2002 and J Hand Surg 2014) and whether the figure lies inside it. Works on
     generated datasets and ingested recordings (a figure the dataset cannot give reads "not in
     this dataset"); two datasets are laid side by side.
+
+    A folder of real box-labelled prints (images/ and YOLO labels/, the real_hands layout) is
+    described by six statistics of the print's shape (blobs, contact area in mm², span in mm,
+    parts boxed, the share of fingers that leave a blob of their own, the palm's share of the
+    boxed contact), as median and interquartile range; a dataset beside it is measured alike on
+    its hand prints (each part boxed tightly around its contact pixels), by action too.
     """
     paths = [dataset] if dataset2 is None else [dataset, dataset2]
     try:
         if seed < 0:
             raise ConfigError(f"--seed {seed} is out of range; allowed >= 0")
+        if any(is_box_folder(p) for p in paths):
+            shape_report(paths, out, png, classes, frame, level, min_blob_px)
+            return
         for path, what in zip(paths, ("DATASET", "DATASET2"), strict=False):
             check_dataset(path, what)
-        check_outputs(out, png)
+        check_outputs(out, png, paths)
         stats = [
             dataset_stats(p, name=n, seed=seed, progress=progress)
             for p, n in zip(paths, names_of(paths), strict=True)
@@ -108,6 +147,63 @@ def stats_command(
         raise typer.Exit(2) from err
     for line in summary_lines(stats):
         typer.echo(line)
+    for flag, path in (("report", out), ("picture", png)):
+        if path is not None:
+            typer.echo(f"{flag}: {path}")
+
+
+def shape_report(paths, out, png, classes, frame, level, min_blob_px) -> None:
+    """`handskin stats` with a box folder among its inputs: the six print statistics of each
+    input side by side, against the first box folder's interquartile range."""
+    if not 0 <= level <= 254:
+        raise ConfigError(f"--level {level} is out of range; allowed 0..254")
+    if min_blob_px < 1:
+        raise ConfigError(f"--min-blob-px {min_blob_px} is out of range; allowed >= 1")
+    names = [c.strip() for c in classes.split(",")] if classes else None
+    frame_px = parse_frame(frame)
+    folders = {}
+    for path, what in zip(paths, ("DATASET", "DATASET2"), strict=False):
+        if is_box_folder(path):
+            folders[path] = BoxFolder.open(path, names, frame_px)
+        else:
+            check_dataset(path, what)
+    check_outputs(out, png)
+    sets: dict[str, Shapes] = {}
+    for path, name in zip(paths, names_of(paths), strict=True):
+        if path in folders:
+            sets[name] = folder_shapes(folders[path], level, min_blob_px)
+            continue
+        with open_dataset(path) as ds:
+            if "label_image" not in ds.fields:
+                raise DataError(f"{path} has no label_image: its hand parts are unknown")
+            sets[name] = dataset_shapes(ds, level, min_blob_px)
+    reference = next(n for p, n in zip(paths, sets, strict=True) if p in folders)
+    if out is not None:
+        words = command_words(paths, out, png, 0)
+        for flag, value, default in (
+            ("--classes", classes, None),
+            ("--frame", frame, None),
+            ("--level", level, CONTACT_LEVEL),
+            ("--min-blob-px", min_blob_px, MIN_BLOB_PX),
+        ):
+            words += [flag, str(value)] if value != default else []
+        rule = (
+            f"Contact: grey level above {level}, in 8-connected blobs of at least {min_blob_px} "
+            "px, at 1 mm. A simulated print's parts are boxed tightly around their contact "
+            "pixels; labels inside boxes are box-derived (the smallest box holding a pixel)."
+        )
+        head = f"# Print shapes: {' and '.join(sets)}\n\nRegenerate: `{shlex.join(words)}`\n\n"
+        write_text_atomic(out, f"{head}{rule}\n\n{shapes_markdown(sets, reference)}")
+    if png is not None:
+        from tactile.prints.plot import save_shapes_png  # start-up: matplotlib
+
+        save_shapes_png(sets, png, reference)
+    for key, (label, fmt) in STATISTICS.items():
+        cells = []
+        for name, s in sets.items():
+            q = quartiles(s.values[key])
+            cells.append(f"{name} {'n/a' if q is None else fmt.format(q[1])}")
+        typer.echo(f"{label}, median: " + "; ".join(cells))
     for flag, path in (("report", out), ("picture", png)):
         if path is not None:
             typer.echo(f"{flag}: {path}")

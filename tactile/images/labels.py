@@ -33,6 +33,9 @@ PALETTE = np.array(
     dtype=np.uint8,
 )
 N_CLASSES = len(CLASS_NAMES)
+#: The label of a pixel no loss or score counts (a pressed pixel that no box names, in
+#: box-derived labels; a pixel a map rebuilt without some taxels cannot place).
+IGNORE = 255
 
 
 class PartSummary(NamedTuple):

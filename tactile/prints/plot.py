@@ -19,6 +19,7 @@ from tactile.files import save_figure
 from tactile.images.labels import PALETTE
 from tactile.prints.anchors import ANCHORS
 from tactile.prints.figures import PARTS
+from tactile.prints.shapes import STATISTICS, quartiles
 from tactile.prints.stats import DatasetStats
 
 KIND_COLOURS = {"hand": "#c0392b", "object": "#2471a3", "body": "#229954", "non_hand": "#7d3c98"}
@@ -177,3 +178,27 @@ def save_stats_png(stats: list[DatasetStats], png: str | Path) -> Path:
     _anchors(axes[2, 2], stats)
     fig.suptitle("prints of " + " and ".join(s.name for s in stats))
     return save_figure(fig, png, dpi=80)
+
+
+def save_shapes_png(sets: dict, png: str | Path, reference: str | None = None) -> Path:
+    """Draw the six print statistics (`tactile.prints.shapes.STATISTICS`) of named
+    `tactile.prints.shapes.Shapes` as box plots side by side (box: IQR, line: median, whiskers:
+    5th and 95th percentiles), the IQR of ``reference`` shaded across each panel."""
+    fig = Figure(figsize=(15, 8.5), layout="constrained")
+    for ax, (key, (label, _)) in zip(fig.subplots(2, 3).ravel(), STATISTICS.items(), strict=True):
+        data = [s.values[key][np.isfinite(s.values[key])] for s in sets.values()]
+        ref = None if reference is None else quartiles(sets[reference].values[key])
+        if ref is not None:
+            ax.axhspan(ref[0], ref[2], color="0.85", zorder=0, label=f"{reference}: IQR")
+            ax.legend(fontsize=8, loc="upper right")
+        ax.boxplot(
+            [d if len(d) else [np.nan] for d in data],
+            whis=(5, 95),
+            showfliers=False,
+            medianprops={"color": "#c0392b", "linewidth": 2},
+        )
+        ax.set_xticks(range(1, len(sets) + 1), [f"{n}\n({len(s)} prints)" for n, s in sets.items()])
+        ax.set_title(label, fontsize=10)
+        ax.tick_params(labelsize=8)
+    fig.suptitle("print shapes: " + ", ".join(sets), fontsize=12)
+    return save_figure(fig, png)

@@ -1,0 +1,209 @@
+"""The shape of a hand print, measured alike on real box-labelled prints and on simulated ones:
+six statistics that say whether a print is broken into marks per finger and pad, how large it
+is, and which parts it shows.
+
+    s = print_shape(image, boxes)              # one print: image (H, W) uint8, boxes (K, 5)
+    real = folder_shapes(BoxFolder.open(...))  # every print of a folder
+    sim = dataset_shapes(open_dataset("data/paper"))   # its hand prints, with their actions
+    shapes_markdown({"fold1": real, "default set": sim})
+
+Contact: grey level above ``level`` (4: levels 1 to 4 are resampling residue of the real
+images) in 8-connected blobs of at least ``min_blob_px`` pixels (30), on a 1 mm grid
+(``step_mm``). The statistics of a print:
+
+- ``blobs``: its separate blobs;
+- ``area_mm2``: its contact pixels times the pixel area;
+- ``span_mm``: the longer side of the box around them;
+- ``parts``: the hand parts boxed (a real print) or showing at least ``min_blob_px`` contact
+  pixels (a simulated one);
+- ``finger_blobs``: the share of its boxed fingers that leave a blob of their own: a blob whose
+  box-derived labels (`tactile.dataset.boxes.box_labels`) are all that finger's;
+- ``palm_share``: the palm's share of its box-labelled contact pixels.
+
+A simulated print is boxed as a person would box it: one tight box per part around that part's
+contact pixels (`boxes_of_labels`), so both sides go through the same box rule.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+
+from tactile.dataset.boxes import CONTACT_LEVEL, box_labels
+from tactile.images.labels import CLASS_NAMES, IGNORE
+from tactile.prints.measures import EIGHT_NEIGHBOURS, action_names
+
+MIN_BLOB_PX = 30  # blobs below this many pixels are specks, not marks (real_hands README)
+PALM = CLASS_NAMES.index("palm")
+STATISTICS = {  # name: (what the report calls it, format)
+    "blobs": ("separate blobs per print", "{:.0f}"),
+    "area_mm2": ("contact area, mm²", "{:,.0f}"),
+    "span_mm": ("span of the print (largest extent), mm", "{:.0f}"),
+    "parts": ("hand parts boxed or labelled", "{:.0f}"),
+    "finger_blobs": ("share of a print's fingers that leave a blob of their own", "{:.2f}"),
+    "palm_share": ("palm's share of the boxed contact pixels", "{:.2f}"),
+}
+
+
+@dataclass
+class Shapes:
+    """The statistics of S prints: one (S,) float array per name of `STATISTICS` (NaN where a
+    print has no value: no finger boxed, no boxed contact), and each print's ``action``."""
+
+    values: dict[str, np.ndarray]
+    action: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
+
+    def __len__(self) -> int:
+        return len(self.values["blobs"])
+
+    def subset(self, mask: np.ndarray) -> Shapes:
+        return Shapes({k: v[mask] for k, v in self.values.items()}, self.action[mask])
+
+
+def contact_blobs(image: np.ndarray, level: int, min_blob_px: int) -> np.ndarray:
+    """(H, W) int64: each contact pixel's blob (1..B, blobs of at least ``min_blob_px``), 0
+    elsewhere."""
+    lab, _ = ndimage.label(image > level, structure=EIGHT_NEIGHBOURS)
+    sizes = np.bincount(lab.ravel())
+    keep = sizes >= min_blob_px
+    keep[0] = False
+    renumber = np.cumsum(keep) * keep
+    return renumber[lab]
+
+
+def print_shape(
+    image: np.ndarray,
+    boxes: np.ndarray,
+    step_mm: float = 1.0,
+    level: int = CONTACT_LEVEL,
+    min_blob_px: int = MIN_BLOB_PX,
+) -> dict[str, float]:
+    """The six statistics of one print: ``image`` (H, W) uint8, ``boxes`` (K, 5) int (part, r0,
+    r1, c0, c1, px)."""
+    blobs = contact_blobs(image, level, min_blob_px)
+    contact = blobs > 0
+    rows, cols = np.nonzero(contact)
+    span = max(np.ptp(rows), np.ptp(cols)) + 1 if len(rows) else 0
+    labels = np.where(contact, box_labels(image, boxes, level), 0)
+    boxed = (labels > 0) & (labels != IGNORE)
+    fingers = set(boxes[:, 0].tolist()) - {PALM}
+    own = set()
+    for b in range(1, int(blobs.max(initial=0)) + 1):
+        parts = np.unique(labels[(blobs == b) & boxed])
+        if len(parts) == 1 and parts[0] in fingers:
+            own.add(int(parts[0]))
+    return {
+        "blobs": float(blobs.max(initial=0)),
+        "area_mm2": float(contact.sum()) * step_mm**2,
+        "span_mm": float(span) * step_mm,
+        "parts": float(len(set(boxes[:, 0].tolist()))),
+        "finger_blobs": len(own) / len(fingers) if fingers else np.nan,
+        "palm_share": (labels == PALM).sum() / boxed.sum() if boxed.any() else np.nan,
+    }
+
+
+def boxes_of_labels(
+    label_image: np.ndarray,
+    image: np.ndarray,
+    level: int = CONTACT_LEVEL,
+    min_blob_px: int = MIN_BLOB_PX,
+) -> np.ndarray:
+    """(K, 5) int64: one tight box per hand part of a simulated print (its label image (H, W)),
+    around the part's contact pixels, for each part with at least ``min_blob_px`` of them."""
+    contact = contact_blobs(image, level, min_blob_px) > 0
+    out = []
+    for part in range(1, len(CLASS_NAMES)):
+        rows, cols = np.nonzero(contact & (label_image == part))
+        if len(rows) >= min_blob_px:
+            out.append((part, rows.min(), rows.max() + 1, cols.min(), cols.max() + 1))
+    return np.array(out, np.int64).reshape(-1, 5)
+
+
+def _stack(rows: list[dict[str, float]], action) -> Shapes:
+    values = {k: np.array([r[k] for r in rows], float) for k in STATISTICS}
+    return Shapes(values, np.asarray(action, str))
+
+
+def folder_shapes(folder, level: int = CONTACT_LEVEL, min_blob_px: int = MIN_BLOB_PX) -> Shapes:
+    """The statistics of every print of a `tactile.dataset.boxes.BoxFolder` (1 mm per pixel in
+    its native frame)."""
+    rows = [print_shape(p.image, p.boxes, 1.0, level, min_blob_px) for p in folder]
+    return _stack(rows, np.full(len(rows), "", dtype=object))
+
+
+def dataset_shapes(ds, level: int = CONTACT_LEVEL, min_blob_px: int = MIN_BLOB_PX) -> Shapes:
+    """The statistics of the hand prints of a dataset (a `tactile.dataset.DatasetReader` with
+    ``image`` and ``label_image``), each boxed by `boxes_of_labels`, with its action."""
+    hands = np.flatnonzero(ds.is_hand[:] == 1)
+    step = float(ds.map.step_mm)
+    rows = []
+    for i in hands.tolist():
+        image, labels = np.asarray(ds.image[i]), np.asarray(ds.label_image[i])
+        boxes = boxes_of_labels(labels, image, level, min_blob_px)
+        rows.append(print_shape(image, boxes, step, level, min_blob_px))
+    return _stack(rows, action_names(ds, ds.action[:] if "action" in ds.fields else None)[hands])
+
+
+def quartiles(x: np.ndarray) -> tuple[float, float, float] | None:
+    """(25th percentile, median, 75th percentile) of the finite values, None without any."""
+    x = x[np.isfinite(x)]
+    return None if not len(x) else tuple(float(v) for v in np.percentile(x, [25, 50, 75]))
+
+
+def inside(value: float, iqr: tuple[float, float, float] | None) -> bool:
+    """Whether ``value`` lies inside the interquartile range of ``iqr`` (ends included)."""
+    return iqr is not None and iqr[0] <= value <= iqr[2]
+
+
+def shapes_markdown(sets: dict[str, Shapes], reference: str | None = None) -> str:
+    """The six statistics of each named set as median [IQR], side by side; with ``reference``
+    (a set's name), a last column says whether each other set's median lies inside its IQR.
+    Sets with actions get a table of medians by action."""
+    names = list(sets)
+    head = ["print statistic", *(f"{n} ({len(sets[n])} prints): median [IQR]" for n in names)]
+    if reference is not None:
+        head.append(f"inside {reference}'s IQR")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for key, (label, fmt) in STATISTICS.items():
+        cells = [label]
+        for n in names:
+            q = quartiles(sets[n].values[key])
+            cells.append(
+                "n/a"
+                if q is None
+                else f"{fmt.format(q[1])} [{fmt.format(q[0])}, {fmt.format(q[2])}]"
+            )
+        if reference is not None:
+            ref = quartiles(sets[reference].values[key])
+            others = [
+                n for n in names if n != reference and quartiles(sets[n].values[key]) is not None
+            ]
+            cells.append(
+                ", ".join(
+                    f"{n}: {'yes' if inside(quartiles(sets[n].values[key])[1], ref) else 'no'}"
+                    for n in others
+                )
+            )
+        lines.append("| " + " | ".join(cells) + " |")
+    for n in names:
+        lines += _by_action(n, sets[n])
+    return "\n".join(lines) + "\n"
+
+
+def _by_action(name: str, shapes: Shapes) -> list[str]:
+    actions = sorted({a for a in shapes.action.tolist() if a})
+    if not actions:
+        return []
+    head = ["action", "prints", *(STATISTICS[k][0] for k in STATISTICS)]
+    out = ["", f"{name}, medians by action:", "", "| " + " | ".join(head) + " |"]
+    out.append("|" + "---|" * len(head))
+    for a in actions:
+        sub = shapes.subset(shapes.action == a)
+        cells = [a, str(len(sub))]
+        for key, (_, fmt) in STATISTICS.items():
+            q = quartiles(sub.values[key])
+            cells.append("n/a" if q is None else fmt.format(q[1]))
+        out.append("| " + " | ".join(cells) + " |")
+    return out
