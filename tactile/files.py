@@ -4,6 +4,7 @@ that are atomic, honour the umask and report a full disk as one line.
     require_input(path, "layout", LayoutError)          # exists, is a file
     lines = text_lines(path, "layout", LayoutError)     # UTF-8 text, else "binary file?"
     require_writable(Path("out/run"), "--out")          # before any work: ConfigError
+    require_output(png, "--png", reads=[dataset], suffixes=(".png",))   # every command's outputs
     with atomic_path(path) as tmp: write(tmp)           # tmp replaces path on success only
     with staged([png]) as (tmp_png,): fig.savefig(tmp_png)   # savers that write files beside it
     with writing(path, need_bytes=n): ...               # OSError -> DataError naming path, space
@@ -19,7 +20,7 @@ import errno
 import os
 import secrets
 import shutil
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from pathlib import Path
 
 from tactile.errors import ConfigError, DataError
@@ -27,6 +28,14 @@ from tactile.errors import ConfigError, DataError
 DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
 NOT_WRITABLE = (errno.EROFS, errno.EACCES, errno.EPERM)
 STAGE_PREFIX = ".handskin-stage-"
+# The files a dataset folder (handskin generate, merge, ingest) and a run folder (handskin train)
+# consist of: a folder holding one of the first names is one; no other command's output replaces
+# any of them. As tactile.dataset.folder, tactile.dataset.manifest, learn.train.checkpoint and
+# learn.classical.svm name them (tests/test_bad_inputs.py checks that they agree).
+DATASET_MARKS = ("dataset.h5", "manifest.json")
+DATASET_FILES = (*DATASET_MARKS, "info.json", "chunks")
+RUN_MARKS = ("best.pt", "last.pt", "model.npz")
+RUN_FILES = (*RUN_MARKS, "run.toml", "test_metrics.json", "curves.png", "crossval.md")
 
 
 def require_input(path: Path, what: str, error: type[Exception] = DataError) -> Path:
@@ -77,6 +86,105 @@ def require_writable(path: Path, flag: str, folder: bool = False) -> None:
         raise ConfigError(f"{flag} {path}: {where} is on a read-only disk. Fix: {_fix(flag)}")
     if not os.access(where, os.W_OK | os.X_OK) or (base.is_file() and not os.access(base, os.W_OK)):
         raise ConfigError(f"{flag} {path}: no permission to write in {where}. Fix: {_fix(flag)}")
+
+
+def require_output(
+    path: Path | None,
+    flag: str,
+    *,
+    reads: Iterable[Path | None] = (),
+    suffixes: Sequence[str] = (),
+    derived: Iterable[Path] = (),
+    folder: bool = False,
+    makes: str = "",
+) -> None:
+    """ConfigError, before any work, for an output ``path`` given as ``flag`` (None: not given).
+
+    Refused: a path `require_writable` refuses; a file (``path`` or a ``derived`` file written
+    beside it) that is, once symlinks and ``..`` are resolved, a file the command ``reads`` or
+    lies in a folder it reads, or one of the files a dataset or run folder consists of
+    (``DATASET_FILES``, ``RUN_FILES``); a file whose suffix is not among ``suffixes`` (given:
+    what will be written). A ``folder`` output may not be a folder the command reads, nor a
+    dataset or run folder unless it ``makes`` one of that kind ("dataset" or "run"); the files
+    it will hold, ``derived``, are checked as files.
+    """
+    if path is None:
+        return
+    path = Path(path)
+    require_writable(path, flag, folder)
+    inputs = {Path(os.path.realpath(p)): Path(p) for p in reads if p is not None}
+    if folder:
+        _own_folder(path, flag, inputs, makes)
+    for target in [*derived] if folder else [path, *derived]:
+        _not_an_input(Path(target), path, flag, inputs)
+    if not folder and suffixes and path.suffix.lower() not in suffixes:
+        raise ConfigError(
+            f"{flag} {path}: name the file with a {' or '.join(suffixes)} suffix, as what is "
+            f"written there. Fix: e.g. {flag} {path.with_suffix(suffixes[0])}"
+        )
+
+
+def _not_an_input(target: Path, path: Path, flag: str, inputs: dict[Path, Path]) -> None:
+    """ConfigError when writing ``target`` (for ``flag path``) would replace an input (``inputs``:
+    resolved path -> as given) or a file of a dataset or run folder."""
+    real = Path(os.path.realpath(target))
+    if not real.exists():
+        return
+    head = f"{flag} {path} would" + ("" if target == path else f" also write {target} and")
+    link = [] if Path(os.path.abspath(target)) == real else [f"{target} links to {real}"]
+    for p, given in inputs.items():
+        if real == p or p in real.parents or (p.exists() and os.path.samefile(real, p)):
+            where = "; ".join(link + ([] if real == p else [f"in {given}"]))
+            raise ConfigError(
+                f"{head} write over a file this command reads{f' ({where})' if where else ''}. "
+                f"Fix: give another {flag} path"
+            )
+    kind, home = folder_kind(real.parent)
+    if kind is None and real.parent.name == "chunks":
+        kind, home = folder_kind(real.parent.parent)
+    members = DATASET_FILES if kind == "dataset" else RUN_FILES
+    if kind is not None and real.relative_to(home).parts[0] in members:
+        raise ConfigError(
+            f"{head} replace {real.relative_to(home)} of the {kind} folder {_near(home)}. "
+            f"Fix: give another {flag} path (outside that folder, or another file name)"
+        )
+
+
+def _own_folder(path: Path, flag: str, inputs: dict[Path, Path], makes: str) -> None:
+    """ConfigError when an output folder is one the command reads, or a dataset or run folder
+    (or its chunks/) of another kind than the command ``makes``."""
+    real = Path(os.path.realpath(path))
+    if real in inputs:
+        raise ConfigError(
+            f"{flag} {path} is the folder this command reads. Fix: give a new {flag} folder"
+        )
+    kind, home = folder_kind(real)
+    if kind is None and real.name == "chunks":
+        kind, home = folder_kind(real.parent)
+    if kind is not None and kind != makes:
+        raise ConfigError(
+            f"{flag} {path}: {_near(home)} is a {kind} folder; this command would mix its "
+            f"files with the {kind}'s. Fix: give a new {flag} folder"
+        )
+
+
+def _near(path: Path) -> Path:
+    """``path`` relative to the working folder when it lies inside it."""
+    try:
+        return path.relative_to(Path.cwd())
+    except ValueError:
+        return path
+
+
+def folder_kind(folder: Path) -> tuple[str | None, Path]:
+    """("dataset" or "run" or None, ``folder``): whether ``folder`` holds a dataset (a
+    ``DATASET_MARKS`` file) or a training run (a ``RUN_MARKS`` file)."""
+    folder = Path(folder)
+    if any((folder / name).exists() for name in DATASET_MARKS):
+        return "dataset", folder
+    if any((folder / name).is_file() for name in RUN_MARKS):
+        return "run", folder
+    return None, folder
 
 
 def _read_only(folder: Path) -> bool:

@@ -77,7 +77,21 @@ def world(tmp_path_factory) -> dict[str, Path]:
     w["exp"] = root / "exp"
     (root / "notes.png").write_text("not an image\n")
     (root / "text.jpg").write_text("not an image either\n")
+    _frames_and_links(root, w)
     return w
+
+
+def _frames_and_links(root: Path, w: dict) -> None:
+    """A link to the dataset's file, one sample's raw frame, frames of impossible counts."""
+    import h5py
+
+    (root / "link.png").symlink_to(w["ds"] / "dataset.h5")
+    with h5py.File(w["ds"] / "dataset.h5") as f:
+        raw = f["samples/raw"][0].astype(np.int64)
+    np.save(root / "frame.npy", raw.astype(np.float64))
+    np.savetxt(root / "frame_neg.csv", -raw[None] - 5, fmt="%d", delimiter=",")
+    np.savetxt(root / "frame_big.csv", raw[None] + 70_000, fmt="%d", delimiter=",")
+    np.save(root / "frame_1e300.npy", np.full(len(raw), 1e300))
 
 
 def _layouts_and_recordings(root: Path, w: dict) -> None:
@@ -427,6 +441,56 @@ CASES = [
         read_only,
     ),
 ]
+# An output never writes over what the command reads, nor over a dataset's or a run's files, and
+# its suffix names what is written (tactile.files.require_output): the issue's examples and the
+# cases around them (links, "..", files written beside the output, folders).
+READS = ("write over a file this command reads",)
+EV = ["evaluate", R + "/ds", R + "/run/best.pt", "--out"]
+PR = ["predict", R + "/ds", "--sample", "0", "--classifier", R + "/run/best.pt", "--png"]
+FRAME = ["predict", R + "/frame.npy", "--map", R + "/ds"]
+OUTPUT_CASES = [
+    Case("view-png-over-dataset", ["view", R + "/ds", "--png", R + "/ds/dataset.h5"], READS),
+    Case("view-png-dotdot", ["view", R + "/ds", "--png", R + "/run/../ds/info.json"], READS),
+    Case("view-png-link-to-input", ["view", R + "/ds", "--png", R + "/link.png"], ("links to",)),
+    Case("view-panel-suffix", ["view", R + "/ds", "--panel", R + "/v.svgz"], (".png suffix",)),
+    Case("view-sequence-suffix", ["view", R + "/ds", "--sequence", R + "/s.mp4"], (".gif or",)),
+    Case("evaluate-out-checkpoint", [*EV, R + "/run/best.pt"], READS),
+    Case("evaluate-json-beside", [*EV, R + "/ds/info.md"], ("also write", "info.json", *READS)),
+    Case("evaluate-json-run-file", [*EV, R + "/run/test_metrics.md"], ("of the run folder",)),
+    Case("evaluate-out-suffix", [*EV, R + "/report.txt"], (".md suffix", "report.md")),
+    Case("stats-out-info", ["stats", R + "/ds", "--out", R + "/ds/info.json"], READS),
+    Case("stats-out-dataset", ["stats", R + "/ds", "--out", R + "/ds/dataset.h5"], READS),
+    Case("stats-out-suffix", ["stats", R + "/ds", "--out", R + "/s.png"], (".md suffix",)),
+    Case("stats-png-run-file", ["stats", R + "/ds", "--png", R + "/run/curves.png"], ("run",)),
+    Case("sheet-png-dataset", ["sheet", R + "/ds", "--png", R + "/ds/dataset.h5"], READS),
+    Case("sheet-png-suffix", ["sheet", R + "/ds", "--png", R + "/s.pdfx"], (".png suffix",)),
+    Case(
+        "sheet-png-other-dataset", ["sheet", R + "/ds", "--png", R + "/other/info.json"], ("other",)
+    ),
+    Case(
+        "predict-out-over-frame",
+        [*FRAME, "--segmenter", R + "/run/best.pt", "--out", R + "/frame.npy"],
+        READS,
+    ),
+    Case("predict-png-checkpoint", [*PR, R + "/run/best.pt"], READS),
+    Case("predict-png-run-file", [*PR, R + "/run/curves.png"], ("curves.png of the run",)),
+    Case("predict-png-suffix", [*PR, R + "/p.tiff"], (".png suffix",)),
+    Case("map-out-over-layout", ["map", R + "/layout.npz", "--out", R + "/layout.npz"], READS),
+    Case("map-png-over-layout", ["map", R + "/layout.csv", "--png", R + "/layout.csv"], READS),
+    Case("map-png-suffix", ["map", R + "/layout.csv", "--png", R + "/m.xyz"], (".png suffix",)),
+    Case("part-png-dataset", ["part", "plate", "--map-png", R + "/ds/dataset.h5"], ("dataset",)),
+    Case("probe-png-dataset", ["probe", "--png", R + "/ds/manifest.json"], ("manifest.json of",)),
+    Case("export-out-input", ["export", R + "/ds", "--out", R + "/ds"], ("folder this command",)),
+    Case("train-out-input", ["train", R + "/ds", "--out", R + "/ds"], ("folder this command",)),
+    Case("train-out-chunks", ["train", R + "/ds", "--out", R + "/ds/chunks"], ("dataset folder",)),
+    Case(
+        "ingest-out-run",
+        ["ingest", R + "/layout.csv", R + "/frames.csv", "--out", R + "/run"],
+        ("run folder",),
+    ),
+    Case("assets-out-dataset", ["assets", "--out", R + "/ds"], ("dataset folder",)),
+]
+CASES += OUTPUT_CASES
 TEMPORARY = (".tmp", files.STAGE_PREFIX)
 COMMANDS = ("map", "part", "probe", "assets", "generate", "merge", "export", "ingest", "sheet")
 COMMANDS += ("view", "verify", "train", "evaluate", "predict", "quantize", "experiment")
@@ -467,3 +531,19 @@ def test_the_table_covers_the_subcommands_with_forty_inputs_or_more() -> None:
     assert len(CASES) >= 40 and tried >= set(COMMANDS), set(COMMANDS) - tried
     registered = {c.name for c in app.registered_commands} | {"experiment"}
     assert set(COMMANDS) <= registered
+
+
+def test_the_output_rule_knows_every_file_of_a_dataset_and_a_run(world) -> None:
+    """`tactile.files` names the files of dataset and run folders as their writers do: every
+    file and folder a generated dataset and a trained run hold."""
+    from learn.classical.svm import MODEL_FILE
+    from learn.train.checkpoint import BEST, LAST
+    from tactile.dataset.folder import DATASET
+    from tactile.dataset.manifest import MANIFEST
+
+    assert set(files.DATASET_MARKS) == {DATASET, MANIFEST}
+    assert set(files.RUN_MARKS) == {BEST, LAST, MODEL_FILE}
+    assert {p.name for p in world["ds"].iterdir()} <= set(files.DATASET_FILES)
+    assert {p.name for p in world["run"].iterdir()} <= set(files.RUN_FILES)
+    assert files.folder_kind(world["ds"])[0] == "dataset"
+    assert files.folder_kind(world["run"])[0] == "run"

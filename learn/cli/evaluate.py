@@ -23,7 +23,7 @@ from learn.cli.options import (
 )
 from tactile.dataset.boxes import is_box_folder
 from tactile.errors import ConfigError, HandskinError, require_folder
-from tactile.files import os_error_text, require_writable
+from tactile.files import os_error_text, require_output, require_writable
 
 
 def evaluate_command(
@@ -72,7 +72,9 @@ def evaluate_command(
         check_timing(time_runs, time_rounds, threads)
         check_data(data)
         require_folder(out.parent, "--out", "give a file path in a folder")
-        require_writable(out, "--out")
+        beside = [out.with_suffix(".json"), out.with_name(f"{out.stem}_actions_frames.png")]
+        beside += [out.with_name(f"{out.stem}_actions_confusion.png")]
+        require_output(out, "--out", reads=[data, *checkpoints], suffixes=(".md",), derived=beside)
         models = [c for c in checkpoints if c.suffix == ".npz"]
         for m in models:
             load_npz(m)
@@ -168,7 +170,7 @@ def quantize_command(
             raise ConfigError(f"--out {out}: name the int8 file with a .pt suffix")
         if out.exists() and not is_int8(load_checkpoint(out)):
             raise ConfigError(f"--out {out} holds a float checkpoint; it is not written over")
-        require_writable(out, "--out")
+        require_output(out, "--out", reads=[checkpoint, calibration], suffixes=(".pt",))
         where = F.calibration_source(ckpt, calibration)
         hand = (ckpt.get("data") or {}).get("hand_classes")
         calib = F.calibration_images(where, run, hand and tuple(hand), images)

@@ -12,7 +12,7 @@ import typer
 
 from learn.cli.options import ClfOpt, SegOpt, ThreadsOpt, TtaOpt, fail, opt
 from tactile.errors import ConfigError, DataError, HandskinError, require_positive
-from tactile.files import atomic_path, os_error_text, require_writable
+from tactile.files import atomic_path, os_error_text, require_output
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp")
 FRAME_SUFFIXES = (".csv", ".npy")
@@ -59,9 +59,10 @@ def predict_command(
         if threshold_pa is not None and not threshold_pa >= 0:
             raise ConfigError(f"--threshold-pa {threshold_pa}: give a pressure >= 0 Pa")
         require_positive("--step-mm", step_mm, "mm/pixel")
-        for flag, path in (("--out", out), ("--png", png)):
-            if path is not None:
-                require_writable(path, flag)
+        reads = [source, map_, *(classifier or ()), *(segmenter or ()), calibration]
+        require_output(out, "--out", reads=reads, suffixes=(".npy",))
+        parts = [png.with_name(f"{png.stem}_parts.png")] if png is not None else []
+        require_output(png, "--png", reads=reads, suffixes=(".png",), derived=parts)
         loaded = None if kind != "dataset" else P.read_sample(source, sample)
         if loaded is not None and threshold_pa is not None:
             loaded = dataclasses.replace(loaded, threshold_pa=threshold_pa)

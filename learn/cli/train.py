@@ -22,7 +22,7 @@ from learn.cli.options import (
 )
 from tactile.config import to_dict
 from tactile.errors import ConfigError, HandskinError, require_folder
-from tactile.files import os_error_text, require_writable, write_text_atomic
+from tactile.files import os_error_text, require_output, write_text_atomic
 
 CLASSICAL = ("bovw", "vgg_svm")  # as learn.classical.svm.CLASSICAL (not imported: fast --help)
 
@@ -96,7 +96,7 @@ def train_command(
     try:
         check_data(data)
         require_folder(out)
-        require_writable(out, "--out", folder=True)
+        require_output(out, "--out", reads=[data, config, init], folder=True, makes="run")
         if arch in CLASSICAL:
             network_only = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction}
             network_only |= {"--precision": precision, "--device": device, "--test-c": test_c}

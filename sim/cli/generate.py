@@ -18,7 +18,7 @@ from sim.warp.options import WarpOptions
 from tactile.config import to_toml
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, HandskinError
-from tactile.files import require_writable
+from tactile.files import require_output
 
 
 def _fail(err: Exception) -> typer.Exit:
@@ -160,7 +160,7 @@ def generate_command(
         if print_config:
             typer.echo(to_toml(cfg), nl=False)
             return
-        require_writable(out, "--out", folder=True)
+        require_output(out, "--out", reads=[config], folder=True, makes="dataset")
         warp = warp_options(worlds, device, nconmax, njmax)
         with echo_warnings():  # a repaired link mesh says so
             if cfg.backend == "warp" or warp is not None:
@@ -233,7 +233,7 @@ def merge_command(
     """Merge dataset shards (`generate --shard i/n`) into one dataset, equal to a single run."""
 
     try:
-        require_writable(out, "--out", folder=True)
+        require_output(out, "--out", folder=True, makes="dataset")  # a shard may be OUT
         path = merge_shards(shards, out)
     except HandskinError as err:
         raise _fail(err) from err

@@ -16,7 +16,7 @@ from assets import ASSETS_DIR
 from sim.cli.generate import echo_warnings
 from sim.cli.generate import register as register_generate
 from tactile.errors import ConfigError, HandskinError, require_positive
-from tactile.files import require_writable, save_figure, staged
+from tactile.files import require_output, save_figure, staged
 from tactile.images.tactile_map import TactileMap
 
 # The sim modules load trimesh, MuJoCo or pyvista (0.5-2 s): they are imported inside the
@@ -88,10 +88,10 @@ def part_command(
         require_positive("--step-mm", step_mm, "mm/pixel")
         view_names = check_views(views) if png else ()
         for flag, path in (("--png", png), ("--map-png", map_png)):
-            if path is not None:
-                require_writable(path, flag)
-        if out is not None:
-            require_writable(out, "--out", folder=True)
+            require_output(path, flag, reads=[mesh], suffixes=(".png",))
+        assets = [f"{name}_link.stl", f"{name}_layout.npz", f"{name}.xml", "scene.xml"]
+        derived = [out / name / f for f in assets] if out is not None else []
+        require_output(out, "--out", reads=[mesh], folder=True, derived=derived)
         with echo_warnings():
             part = custom_part(mesh, W0_REGION, W0_TILING, name) if mesh else get_part(name)
         tmap = TactileMap.build(part.layout, step_mm=step_mm)
@@ -135,8 +135,7 @@ def probe_command(
         require_positive("--max-force", max_force, "N")
         if n_forces < 2:
             raise ConfigError(f"--n-forces {n_forces} is out of range; allowed >= 2")
-        if png is not None:
-            require_writable(png, "--png")
+        require_output(png, "--png", suffixes=(".png",))
         p = get_part(part)
     except (HandskinError, KeyError) as err:
         raise _fail(err) from err
@@ -178,7 +177,7 @@ def assets_command(
     from sim.skin.parts import PARTS, get_part  # start-up: trimesh
 
     try:
-        require_writable(out or ASSETS_DIR, "--out", folder=True)
+        require_output(out or ASSETS_DIR, "--out", folder=True)
     except HandskinError as err:
         raise _fail(err) from err
     for name in PARTS:

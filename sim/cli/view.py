@@ -20,7 +20,7 @@ from PIL import Image
 from tactile.config import from_dict
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, DataError, HandskinError, require_positive
-from tactile.files import os_error_text, require_writable, save_image
+from tactile.files import os_error_text, require_output, save_image
 from tactile.images.labels import backproject, check_labels
 
 COLORS = ("pressure", "label", "prediction")  # sim.view.render.COLORS, which loads pyvista
@@ -279,10 +279,15 @@ def view_command(
             raise ConfigError("--interactive needs a display (DISPLAY unset); write --png instead")
         if not (png or panel or sequence or interactive or prediction_png):
             png = Path("out/view.png")
-        outputs = {"--png": png, "--panel": panel, "--sequence": sequence}
-        for flag, path in (outputs | {"--prediction-png": prediction_png}).items():
-            if path is not None:
-                require_writable(path, flag)
+        for flag, path, suffixes in (
+            ("--png", png, (".png",)),
+            ("--panel", panel, (".png",)),
+            ("--sequence", sequence, (".gif", ".png")),
+            ("--prediction-png", prediction_png, (".png",)),
+        ):
+            bars = flag == "--prediction-png" and path is not None  # and <stem>_parts.png
+            parts = [path.with_name(f"{path.stem}_parts.png")] if bars else []
+            require_output(path, flag, reads=[dataset, pred], suffixes=suffixes, derived=parts)
         if dataset is not None:
             scene, tmap, smp, seq = from_dataset(dataset, sample)
         else:

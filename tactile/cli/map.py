@@ -11,7 +11,7 @@ import numpy as np
 import typer
 
 from tactile.errors import ConfigError, HandskinError, require_positive
-from tactile.files import atomic_path, require_writable, writing
+from tactile.files import atomic_path, require_output, writing
 from tactile.geometry.layout import TaxelLayout
 from tactile.geometry.synthetic import cylinder_sector_layout
 from tactile.images.tactile_map import TactileMap
@@ -61,11 +61,8 @@ def map_command(
             require_positive("--step-mm", step_mm, "mm/pixel")
             if units not in (None, "m", "mm"):
                 raise ConfigError(f"--units {units!r} unknown; choose m or mm")
-            if out is not None and out.suffix != ".npz":
-                raise ConfigError(f"--out {out}: name the map file with a .npz suffix")
-            for flag, path in (("--out", out), ("--png", png)):
-                if path is not None:
-                    require_writable(path, flag)
+            require_output(out, "--out", reads=[layout], suffixes=(".npz",))
+            require_output(png, "--png", reads=[layout], suffixes=(".png",))
             lay = _load_layout(layout, units)
             tmap = TactileMap.build(lay, step_mm=step_mm)
     except HandskinError as err:
