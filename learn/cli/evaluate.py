@@ -23,7 +23,7 @@ from learn.cli.options import (
 )
 from tactile.dataset.boxes import is_box_folder
 from tactile.errors import ConfigError, HandskinError, require_folder
-from tactile.files import os_error_text, require_output, require_writable
+from tactile.files import os_error_text, require_output
 
 
 def evaluate_command(
@@ -105,7 +105,9 @@ def real_command(data: Path, checkpoints: list[Path], out: Path, negatives: Path
 
     try:
         require_folder(out.parent, "--out", "give a file path in a folder")
-        require_writable(out, "--out")
+        beside = [out.with_suffix(".json"), out.with_suffix(".png")]
+        reads = [data, *checkpoints, negatives]
+        require_output(out, "--out", reads=reads, suffixes=(".md",), derived=beside)
         if negatives is not None:
             check_data(negatives)
         rows, predictions = evaluate_real(data, checkpoints, negatives)

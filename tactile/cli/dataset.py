@@ -16,7 +16,7 @@ from tactile.dataset.ingest import ingest_recording
 from tactile.dataset.reader import open_dataset
 from tactile.dataset.verify import verify_dataset
 from tactile.errors import DataError, HandskinError, require_positive
-from tactile.files import require_output, require_writable
+from tactile.files import require_output
 
 CLASSES = ("hand", "non_hand")
 
@@ -295,7 +295,7 @@ def ingest_boxes_command(
     frame, the label files, and a data.yaml with the part names, the frame and labels_from:
     boxes. handskin train, evaluate and stats read it without further flags."""
     try:
-        require_writable(out, "--out", folder=True)
+        require_output(out, "--out", reads=[folder], folder=True)
         names = [c.strip() for c in classes.split(",")] if classes else None
         path = ingest_boxes(folder, out, names, parse_frame(frame))
     except HandskinError as err:

@@ -167,7 +167,7 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px) -> None:
             folders[path] = BoxFolder.open(path, names, frame_px)
         else:
             check_dataset(path, what)
-    check_outputs(out, png)
+    check_outputs(out, png, paths)
     sets: dict[str, Shapes] = {}
     for path, name in zip(paths, names_of(paths), strict=True):
         if path in folders:
