@@ -491,6 +491,14 @@ OUTPUT_CASES = [
     Case("assets-out-dataset", ["assets", "--out", R + "/ds"], ("dataset folder",)),
 ]
 CASES += OUTPUT_CASES
+# Frames of impossible raw counts for a dataset's map, refused as handskin ingest refuses them
+COUNTS = ("outside 0..65535", "raw counts")
+CLF = ["--map", R + "/ds", "--classifier", R + "/run/best.pt"]
+CASES += [
+    Case("predict-negative-counts", ["predict", R + "/frame_neg.csv", *CLF], COUNTS),
+    Case("predict-counts-above-16-bit", ["predict", R + "/frame_big.csv", *CLF], COUNTS),
+    Case("predict-counts-1e300", ["predict", R + "/frame_1e300.npy", *CLF], ("1e+300", *COUNTS)),
+]
 TEMPORARY = (".tmp", files.STAGE_PREFIX)
 COMMANDS = ("map", "part", "probe", "assets", "generate", "merge", "export", "ingest", "sheet")
 COMMANDS += ("view", "verify", "train", "evaluate", "predict", "quantize", "experiment")

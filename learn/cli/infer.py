@@ -74,7 +74,7 @@ def predict_command(
             pred = P.predict_image(P.load_image(source), clf, seg)
         else:
             tmap, layout, to_pa = P.load_map(map_, step_mm)
-            frame = to_pa(P.read_frame(source, layout))
+            frame = to_pa(P.read_frame(source, layout, to_pa))  # raw counts checked
             pred = P.predict_frame(frame, tmap, clf, seg, threshold_pa or 0.0)
     except (HandskinError, KeyError) as err:
         raise fail(err) from err
@@ -147,7 +147,10 @@ def stream_command(
     step_mm: opt(float, "Grid step of a map built from a layout file, mm/pixel.") = 1.0,
     threads: ThreadsOpt = 1,
 ) -> None:
-    """Recognise a stream of frames: one JSON answer per frame (docs/learning.md, Stream)."""
+    """Recognise a stream of frames: one JSON answer per frame (docs/learning.md, Stream).
+
+    Exit status 0 when every frame was answered, 1 when some were answered with an error, 2
+    when the options are refused."""
     from learn.infer import serve as S  # optional: torch (the learn extra)
 
     try:
@@ -156,6 +159,9 @@ def stream_command(
                 raise DataError(
                     f"no checkpoint at {path}. Fix: give a .pt file from handskin train"
                 )
+        if not threshold_pa >= 0:
+            raise ConfigError(f"--threshold-pa {threshold_pa}: give a pressure >= 0 Pa")
+        require_positive("--step-mm", step_mm, "mm/pixel")
         rec, decode = S.load_recognizer(
             map_,
             classifier and _one(classifier),
@@ -172,6 +178,8 @@ def stream_command(
     except (HandskinError, KeyError) as err:
         raise fail(err) from err
     typer.echo(stats.summary(), err=True)
+    if stats.errors:  # each was answered with its error line; the exit status says so too
+        raise typer.Exit(1)
 
 
 def _one(paths: list[Path]) -> Path | list[Path]:

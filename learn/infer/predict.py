@@ -6,7 +6,7 @@ figure (errors in red when the ground truth is known) and the Fig. 18 per-part b
     clf, seg = load_predictor("runs/handsnet/best.pt"), load_predictor("runs/segnet/best.pt")
     pred = predict_sample(read_sample("out/forearm", 12), clf, seg)     # ground truth attached
     tmap, layout, to_pa = load_map("out/forearm")            # a dataset folder or a layout file
-    pred = predict_frame(to_pa(read_frame("frame.csv", layout)), tmap, clf, seg)
+    pred = predict_frame(to_pa(read_frame("frame.csv", layout, to_pa)), tmap, clf, seg)
     pred.class_name, pred.probability, pred.parts["index"].n_taxels, pred.taxel_labels
     save_figures(pred, "pred.png")                   # pred.png and pred_parts.png
 
@@ -33,6 +33,7 @@ from learn.inputs import input_canvas, labels_on_map, net_input
 from learn.numerics import flushing
 from learn.train.checkpoint import is_int8, load_checkpoint, model_from_checkpoint
 from tactile.dataset.reader import DatasetReader
+from tactile.dataset.readout import MAX_COUNT, count_fault
 from tactile.errors import ConfigError, DataError
 from tactile.geometry.layout import TaxelLayout
 from tactile.images.labels import PartSummary, backproject, contact_instances, part_summary
@@ -244,8 +245,11 @@ def predict_sample(
     return pred
 
 
-def read_frame(path: str | Path, layout: TaxelLayout) -> np.ndarray:
-    """One frame (.npy or .csv, one row; ``#`` comments) of N taxel or C channel values → (N,)."""
+def read_frame(
+    path: str | Path, layout: TaxelLayout, units: FrameUnits | None = None
+) -> np.ndarray:
+    """One frame (.npy or .csv, one row; ``#`` comments) of N taxel or C channel values → (N,);
+    ``units``: the map's (`load_map`), whose raw counts are checked as given."""
     path = Path(path)
     if not path.is_file():
         raise DataError(f"no frame file at {path}")
@@ -256,6 +260,8 @@ def read_frame(path: str | Path, layout: TaxelLayout) -> np.ndarray:
     arr = np.asarray(arr, np.float64).reshape(-1) if np.asarray(arr).ndim <= 2 else None
     if arr is None or not np.isfinite(arr).all():
         raise DataError(f"{path}: expected one row of finite numbers")
+    if units is not None:
+        units.check(arr, str(path))
     if len(arr) == layout.n_taxels:
         return arr
     if layout.n_channels is not None and len(arr) == layout.n_channels:
@@ -266,18 +272,42 @@ def read_frame(path: str | Path, layout: TaxelLayout) -> np.ndarray:
     )
 
 
-def load_map(path: str | Path, step_mm: float = 1.0):
-    """(map, layout, to_pressure) of a dataset folder (its stored map; raw counts → Pa with its
-    skin attributes) or of a layout file (map built at ``step_mm``; values used as they are)."""
+@dataclass(frozen=True)
+class FrameUnits:
+    """What a map's frames hold, called to turn (N,) taxel values into pressures, Pa: raw
+    counts of a dataset's skin (``to_pa``: its readout), or pascals (``to_pa`` None, the map of
+    a layout file)."""
+
+    to_pa: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def __call__(self, values: np.ndarray) -> np.ndarray:
+        values = np.asarray(values, np.float64)
+        return values if self.to_pa is None else np.asarray(self.to_pa(values), np.float64)
+
+    def check(self, values: np.ndarray, where: str = "the frame") -> None:
+        """DataError naming the first of ``values`` (finite, as given: taxels or channels) that
+        is no raw count, as `handskin ingest` refuses it (`tactile.dataset.readout.count_fault`);
+        a map in pascals takes any finite value."""
+        fault = None if self.to_pa is None else count_fault(values)
+        if fault is not None:
+            (i,), rule = fault
+            raise DataError(
+                f"{where}: value {i} is {values[i]:g}, {rule}; the map's dataset reads raw "
+                f"counts. Fix: give raw sensor counts, integers in 0..{MAX_COUNT}"
+            )
+
+
+def load_map(path: str | Path, step_mm: float = 1.0) -> tuple[TactileMap, TaxelLayout, FrameUnits]:
+    """(map, layout, units) of a dataset folder (its stored map; frames in raw counts, → Pa with
+    its skin attributes) or of a layout file (map built at ``step_mm``; frames in Pa)."""
     path = Path(path)
     if is_dataset(path):
         reader = DatasetReader(path)
-        return reader.map, reader.layout, reader.pressure_from_raw
+        return reader.map, reader.layout, FrameUnits(reader.pressure_from_raw)
     if not path.is_file():
         raise DataError(f"no dataset folder or layout file at {path}")
     layout = TaxelLayout.load(path)
-    identity: Callable[[np.ndarray], np.ndarray] = lambda raw: np.asarray(raw, np.float64)  # noqa: E731
-    return TactileMap.build(layout, step_mm=step_mm), layout, identity
+    return TactileMap.build(layout, step_mm=step_mm), layout, FrameUnits()
 
 
 def load_image(path: str | Path) -> np.ndarray:

@@ -10,8 +10,10 @@ object on standard output or a message on a ZeroMQ PUSH socket:
      "mean_pa": 2301.5}, ...}, "taxel_labels": [0, 0, 3, ...], "latency_ms": 3.1}
 
 ``frame`` counts the frames received from 0; ``latency_ms`` runs from the frame's arrival to
-its answer (waiting, parsing and recognition). A frame of the wrong length or with a value
-that is no finite number is answered ``{"frame": 7, "error": "..."}`` and the stream goes on.
+its answer (waiting, parsing and recognition). A frame that cannot be read is answered
+``{"frame": 7, "error": "..."}`` and the stream goes on: the wrong length, a value that is no
+finite number (or, for a dataset's map, no raw count in 0..65535), a line longer than the map's
+frames can be (`BYTES_PER_VALUE` a value), nested JSON arrays, text that is not UTF-8.
 An answer later than the frame period is counted late; with ``latest``, frames that wait while
 another is recognised are dropped (counted), all but the newest.
 """
@@ -29,36 +31,81 @@ import numpy as np
 import torch
 
 from learn.infer import transport as T
-from learn.infer.predict import load_map, load_predictor
+from learn.infer.predict import FrameUnits, load_map, load_predictor
 from learn.infer.stream import Recognizer, bf16_weights, compiled
 from tactile.errors import ConfigError, DataError, HandskinError
 from tactile.geometry.layout import TaxelLayout
 
+BYTES_PER_VALUE = 32  # the longest a value takes in a line: "-1.2345678901234567e+300, " is 26
+FRAME_ERRORS = (ValueError, TypeError, ArithmeticError, RecursionError)  # a frame's own failures
 
-def parse_values(payload: bytes) -> np.ndarray:
-    """The numbers of one line or message: a JSON array or comma-separated values."""
-    text = payload.decode("utf-8", "replace").strip()
-    try:
-        values = json.loads(text) if text.startswith("[") else text.split(",")
-        return np.asarray(values, dtype=np.float64).reshape(-1)
-    except (ValueError, TypeError) as err:
-        shown = text if len(text) <= 40 else text[:37] + "..."
+
+def parse_values(payload: bytes, max_bytes: int | None = None) -> np.ndarray:
+    """The numbers of one line or message: one flat JSON array of numbers or comma-separated
+    numbers, at most ``max_bytes`` long; DataError naming what else it is."""
+    if max_bytes is not None and len(payload.rstrip(b"\r\n")) > max_bytes:
         raise DataError(
-            f"not a frame: {shown!r} ({err}). Fix: one frame per line, numbers separated by "
-            "commas or a JSON array"
-        ) from err
+            f"a line of more than {max_bytes} bytes, longer than any frame of this map "
+            f"({BYTES_PER_VALUE} bytes a value). Fix: one frame per line"
+        )
+    try:
+        text = payload.decode("utf-8").strip()
+    except UnicodeDecodeError as err:
+        raise DataError(
+            f"not a frame: byte 0x{payload[err.start]:02x} at offset {err.start} is not UTF-8 "
+            "text. Fix: send each frame as text, one per line"
+        ) from None
+    values = _json_numbers(text) if text.startswith(("[", "{")) else text.split(",")
+    try:
+        return np.asarray(values, dtype=np.float64).reshape(-1)
+    except FRAME_ERRORS as err:
+        raise _not_a_frame(text, err) from None
+
+
+def _json_numbers(text: str) -> list[float]:
+    """The numbers of a flat JSON array (nesting 1); DataError for anything else."""
+    brackets = np.frombuffer(text.encode(), np.uint8)
+    depth = np.cumsum((brackets == ord("[")).astype(np.int64) - (brackets == ord("]")))
+    if depth.max(initial=0) > 1:
+        raise DataError(
+            f"not a frame: JSON arrays nested {int(depth.max())} deep; a frame is one flat "
+            "array of numbers (nesting 1). Fix: [v0, v1, ...]"
+        )
+    try:  # numbers as floats: a 400-digit integer is inf, refused below, not an OverflowError
+        values = json.loads(text, parse_int=float, parse_constant=float)
+    except FRAME_ERRORS as err:
+        raise _not_a_frame(text, err) from None
+    kinds = sorted({type(v).__name__ for v in values if type(v) is not float})
+    if not isinstance(values, list) or kinds:
+        what = "a JSON object" if isinstance(values, dict) else f"JSON {', '.join(kinds)} values"
+        raise DataError(f"not a frame: {what}. Fix: a JSON array of numbers, [v0, v1, ...]")
+    return values
+
+
+def _not_a_frame(text: str, err: Exception) -> DataError:
+    shown = text if len(text) <= 40 else text[:37] + "..."
+    return DataError(
+        f"not a frame: {shown!r} ({str(err)[:80]}). Fix: one frame per line, numbers "
+        "separated by commas or a JSON array"
+    )
 
 
 @dataclass(frozen=True)
 class FrameDecoder:
     """Raw values to the (N,) taxel pressures, Pa, a recognizer takes: N taxel values or C
-    channel values (averaged into taxels by ``layout``), then ``to_pa``."""
+    channel values (averaged into taxels by ``layout``), then ``to_pa`` (a dataset's map: raw
+    counts, each checked as `handskin ingest` checks them)."""
 
     layout: TaxelLayout
-    to_pa: Callable[[np.ndarray], np.ndarray]
+    to_pa: FrameUnits
+
+    @property
+    def max_bytes(self) -> int:
+        """The longest line a frame of this map may take, bytes."""
+        return BYTES_PER_VALUE * max(self.layout.n_taxels, self.layout.n_channels or 0) + 64
 
     def __call__(self, payload: bytes) -> np.ndarray:
-        values = parse_values(payload)
+        values = parse_values(payload, self.max_bytes)
         n, c = self.layout.n_taxels, self.layout.n_channels
         if len(values) not in (n, c):
             widths = f"{n} taxel" + ("" if c in (None, n) else f" or {c} channel")
@@ -67,8 +114,9 @@ class FrameDecoder:
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise DataError(f"value {i} of the frame is {values[i]}; give finite numbers")
+        self.to_pa.check(values)
         taxels = values if len(values) == n else self.layout.taxels_from_channels(values)
-        return np.asarray(self.to_pa(taxels), np.float64)
+        return self.to_pa(taxels)
 
 
 @dataclass
@@ -118,6 +166,8 @@ def answer_frame(
         out = {"frame": number} | rec.step(decode(payload)).as_json(labels)
     except HandskinError as err:
         out = {"frame": number, "error": str(err)}
+    except FRAME_ERRORS as err:  # one that no check foresaw: the frame's error, the stream goes on
+        out = {"frame": number, "error": f"not a frame ({type(err).__name__}: {str(err)[:80]})"}
     out["latency_ms"] = round(1e3 * (time.perf_counter() - arrival), 3)
     return out
 
@@ -207,7 +257,7 @@ def run_stream(rec: Recognizer, decode: FrameDecoder, options: StreamOptions) ->
         raise ConfigError(f"--period-ms {o.period_ms}: give the frame period, > 0 ms")
     out = None if o.zmq_out is None else T.zmq_socket(o.zmq_out, "PUSH", "--zmq-out")
     send = T.write_line if out is None else T.send_message(out)
-    messages = T.lines(sys.stdin.buffer)
+    messages = T.lines(sys.stdin.buffer, decode.max_bytes)
     if o.zmq_in is not None:
         messages = T.messages(T.zmq_socket(o.zmq_in, "PULL", "--zmq"))
     try:

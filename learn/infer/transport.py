@@ -50,9 +50,17 @@ class FrameSource:
             return waiting
 
 
-def lines(stream) -> Iterator[bytes]:
-    """The non-blank lines of a binary stream (standard input's ``sys.stdin.buffer``)."""
-    return (line for line in stream if line.strip())
+def lines(stream, max_bytes: int | None = None) -> Iterator[bytes]:
+    """The non-blank lines of a binary stream (standard input's ``sys.stdin.buffer``); a line
+    longer than ``max_bytes`` comes as its first ``max_bytes + 1`` bytes, the rest read past,
+    so that no line fills the memory."""
+    limit = -1 if max_bytes is None else max_bytes + 1
+    while line := stream.readline(limit):
+        if len(line) == limit and not line.endswith(b"\n"):  # cut: skip to the line's end
+            while (rest := stream.readline(limit)) and not rest.endswith(b"\n"):
+                pass
+        if line.strip():
+            yield line
 
 
 def zmq_socket(address: str, kind: str, option: str):

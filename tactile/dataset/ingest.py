@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from tactile.dataset.readout import count_fault
 from tactile.dataset.writer import DatasetWriter
 from tactile.errors import DataError
 from tactile.geometry.layout import TaxelLayout
@@ -31,7 +32,6 @@ from tactile.images.tactile_map import TactileMap
 
 GENERATOR_VERSION = "ingest/1"
 CHUNK_FRAMES = 256  # frames per chunk file: ~1-3 MB of images at 1 mm/px
-MAX_COUNT = 65535  # 16-bit readings
 CLASS_WORDS = {"1": 1, "hand": 1, "0": 0, "non_hand": 0, "non-hand": 0, "nonhand": 0}
 
 
@@ -129,16 +129,13 @@ def _finite(table: Table, arr: np.ndarray, what: str) -> np.ndarray:
 def counts(table: Table, what: str) -> np.ndarray:
     """Raw counts (R, C) float64: integers in 0..65535, else DataError naming row and column."""
     arr = numbers(table, what)
-    for bad, rule in (
-        ((arr < 0) | (arr > MAX_COUNT), f"outside 0..{MAX_COUNT} (16-bit counts)"),
-        (arr != np.round(arr), "not an integer count"),
-    ):
-        if bad.any():
-            r, c = np.argwhere(bad)[0]
-            raise DataError(
-                f"{table.path}, {table.where[r]}, column {c + 1}: {what} value {arr[r, c]:g} is "
-                f"{rule}. Fix: give raw sensor counts (subtract nothing, scale nothing)"
-            )
+    fault = count_fault(arr)
+    if fault is not None:
+        (r, c), rule = fault
+        raise DataError(
+            f"{table.path}, {table.where[r]}, column {c + 1}: {what} value {arr[r, c]:g} is "
+            f"{rule}. Fix: give raw sensor counts (subtract nothing, scale nothing)"
+        )
     return arr
 
 

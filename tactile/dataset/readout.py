@@ -29,6 +29,21 @@ from tactile.errors import DataError
 
 #: The generator reads signals less than this many noise sd above the untouched reading as 0.
 NOISE_FLOOR_SIGMAS = 3.0
+MAX_COUNT = 65535  # 16-bit readings: a raw count is an integer in 0..MAX_COUNT
+
+
+def count_fault(values: np.ndarray) -> tuple[tuple[int, ...], str] | None:
+    """(index, rule broken) of the first value of ``values`` (finite floats) that is no raw
+    count, an integer in 0..``MAX_COUNT``; None when all are (``handskin ingest``, ``predict``
+    and ``stream`` refuse such frames)."""
+    values = np.asarray(values, dtype=np.float64)
+    for bad, rule in (
+        ((values < 0) | (values > MAX_COUNT), f"outside 0..{MAX_COUNT} (16-bit counts)"),
+        (values != np.round(values), "not an integer count"),
+    ):
+        if bad.any():
+            return tuple(int(i) for i in np.argwhere(bad)[0]), rule
+    return None
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,7 @@ loopback ZeroMQ socket."""
 
 from __future__ import annotations
 
+import io
 import json
 import socket
 import subprocess
@@ -167,6 +168,64 @@ def test_serve_counts_drops_late_answers_and_errors(frames, predictors):
     assert [a["frame"] for a in sent] == [0, 4, 5] and stats.dropped == 3
 
 
+def hostile_frames(n: int) -> dict[bytes, str]:
+    """Lines a robot's bug (or an attacker) may send to a map of ``n`` taxels, each with words
+    its error line holds: none may end the stream, and raw counts outside what a 16-bit skin
+    reads are refused, as handskin ingest refuses them."""
+    zeros = ",".join(["0"] * (n - 1))
+    row = lambda v: ",".join([v] * n).encode()  # noqa: E731
+    return {
+        f"[{'1' * 400},{zeros}]".encode(): "value 0 of the frame is inf",  # was OverflowError
+        f"{'1' * 400},{zeros}".encode(): "value 0 of the frame is inf",
+        b"[" * 2000 + b"]" * 2000: "JSON arrays nested 2000 deep",  # was RecursionError
+        json.dumps([[0] * (n // 2), [0] * (n - n // 2)]).encode(): "nested 2 deep",
+        b'{"frame": [0, 0]}': "not a frame: a JSON object",
+        json.dumps(["0"] * n).encode(): "JSON str values",
+        json.dumps([True] * n).encode(): "JSON bool values",
+        b"1," * 3_000_000 + b"1": f"a line of more than {32 * n + 64} bytes",
+        b"\xff\xfe\x00" * 50: "byte 0xff at offset 0 is not UTF-8",
+        row("-5"): "value 0 is -5, outside 0..65535",
+        row("70000"): "value 0 is 70000, outside 0..65535",
+        row("1e300"): "value 0 is 1e+300, outside 0..65535",
+        row("12.5"): "value 0 is 12.5, not an integer count",
+        b"[]": "a frame of 0 values",
+    }
+
+
+def test_no_frame_ends_the_stream(frames, predictors):
+    """Each hostile line gets its error line and the good frame after it its answer."""
+    tmap, layout, to_pa, raw = frames
+    rec = Recognizer(tmap, *predictors)
+    bad = hostile_frames(tmap.n_taxels)
+    good = ",".join(map(str, raw[0].astype(np.int64))).encode()
+    lines = [x for line in bad for x in (line, good)]
+    batches = iter([[(0.0, line)] for line in lines])
+    sent: list[dict] = []
+    stats = serve(rec, FrameDecoder(layout, to_pa), lambda: next(batches, None), sent.append)
+    assert [a["frame"] for a in sent] == list(range(len(lines)))
+    for answer, words in zip(sent[::2], bad.values(), strict=True):
+        assert words in answer["error"], (words, answer)
+    for answer in sent[1::2]:
+        check_answer(answer, predict_frame(to_pa(raw[0]), tmap, *predictors))
+    assert (stats.received, stats.errors) == (len(lines), len(bad))
+
+
+def test_a_line_longer_than_any_frame_is_cut_and_the_next_read():
+    from learn.infer.transport import lines
+
+    data = io.BytesIO(b"1,2\n" + b"9" * 10_000 + b"\n\n  \n3,4")
+    assert list(lines(data, max_bytes=100)) == [b"1,2\n", b"9" * 101, b"3,4"]
+
+
+def test_a_layout_map_takes_any_finite_pressure(frames, tmp_path):
+    """Pa for a layout file's map: no raw-count range (negative pressures are a baseline's)."""
+    _, layout, _, _ = frames
+    layout.save(tmp_path / "layout.npz")
+    _, layout, units = load_map(tmp_path / "layout.npz")
+    p = np.full(layout.n_taxels, -12.5)
+    assert np.array_equal(FrameDecoder(layout, units)(",".join(map(str, p)).encode()), p)
+
+
 def recorded_sequence(raw: np.ndarray) -> list[bytes]:
     """The frames as a robot would send them: CSV lines and JSON arrays, raw counts."""
     return [
@@ -195,12 +254,27 @@ def test_stream_command_over_stdin(checkpoints, tiny_dataset, frames, predictors
         stream_args(checkpoints, tiny_dataset),
         input=b"\n".join(lines) + b"\n",
         capture_output=True,
-        check=True,
         timeout=120,
     )
     answers = [json.loads(line) for line in res.stdout.splitlines()]
     check_stream(answers, frames, predictors)
     assert f"stream: {len(lines)} frames, {len(lines)} answered (1 errors)" in res.stderr.decode()
+    assert res.returncode == 1, res.stderr.decode()  # a frame got an error: said at the end too
+
+
+def test_stream_command_exit_status(checkpoints, tiny_dataset, frames):
+    """0 when every frame was answered, 1 when one got an error line (after the others)."""
+    good = recorded_sequence(frames[3][:3])
+    for lines, status in ((good, 0), ([b"-1," * 3 + b"[[[", *good], 1)):
+        res = subprocess.run(
+            stream_args(checkpoints, tiny_dataset),
+            input=b"\n".join(lines) + b"\n",
+            capture_output=True,
+            timeout=120,
+        )
+        assert res.returncode == status, res.stderr.decode()
+        assert len(res.stdout.splitlines()) == len(lines)
+        assert "Traceback" not in res.stderr.decode()
 
 
 def free_port() -> int:
@@ -229,7 +303,7 @@ def test_stream_command_over_zmq(checkpoints, tiny_dataset, frames, predictors):
         proc.kill()
         sender.join()
         ctx.destroy(linger=0)
-    assert proc.returncode == 0, err.decode()
+    assert proc.returncode == 1, err.decode()  # the last frame got an error
     check_stream(answers, frames, predictors)
 
 
