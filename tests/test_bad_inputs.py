@@ -10,6 +10,7 @@ import builtins
 import errno
 import hashlib
 import io
+import json
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -78,7 +79,34 @@ def world(tmp_path_factory) -> dict[str, Path]:
     (root / "notes.png").write_text("not an image\n")
     (root / "text.jpg").write_text("not an image either\n")
     _frames_and_links(root, w)
+    _edited_sidecars(root, w)
     return w
+
+
+def _edited_sidecars(root: Path, w: dict) -> None:
+    """Copies of the dataset with a hand-edited info.json or manifest.json, and a run that was
+    not merged, one of its chunks missing."""
+
+    def manifest(edit):
+        return lambda d: (d / "manifest.json").write_text(
+            json.dumps(edit(json.loads((d / "manifest.json").read_text())))
+        )
+
+    edits = {
+        "info_null": lambda d: (d / "info.json").write_text("null"),
+        "info_list": lambda d: (d / "info.json").write_text("[1, 2]"),
+        "sha_number": manifest(
+            lambda m: m | {"content": {"dataset.h5": {"sha256": 1, "bytes": 2}}}
+        ),
+        "content_text": manifest(lambda m: m | {"content": "abc"}),
+        "n_edited": manifest(lambda m: m | {"config": m["config"] | {"n": 40}}),
+    }
+    for name, edit in edits.items():
+        shutil.copytree(w["ds"], root / name)
+        edit(root / name)
+    shutil.copytree(w["ds"], root / "unmerged")
+    for name in ("dataset.h5", "info.json", "chunks/chunk_000001.h5"):
+        (root / "unmerged" / name).unlink()
 
 
 def _frames_and_links(root: Path, w: dict) -> None:
@@ -196,6 +224,7 @@ class Case:
     words: tuple[str, ...]
     patch: object = None
     writes: bool = False  # the command may leave complete new files (written before the fault)
+    status: int = 2  # the exit status: 2, or the one the command documents (verify's fault: 1)
 
 
 R = "{root}"
@@ -491,6 +520,17 @@ OUTPUT_CASES = [
     Case("assets-out-dataset", ["assets", "--out", R + "/ds"], ("dataset folder",)),
 ]
 CASES += OUTPUT_CASES
+# verify reads each sidecar's structure before using it: a fault (status 1), no traceback
+CASES += [
+    Case("verify-info-null", ["verify", R + "/info_null"], ("info.json: null",), status=1),
+    Case("verify-info-list", ["verify", R + "/info_list"], ("info.json: a list",), status=1),
+    Case("verify-sha-number", ["verify", R + "/sha_number"], ("sha256 the number 1",), status=1),
+    Case("verify-content-text", ["verify", R + "/content_text"], ("content is text",), status=1),
+    Case("verify-config-edited", ["verify", R + "/n_edited"], ("was edited",), status=1),
+    Case(
+        "verify-unmerged-gap", ["verify", R + "/unmerged"], ("chunk_000001.h5: missing",), status=1
+    ),
+]
 # Frames of impossible raw counts for a dataset's map, refused as handskin ingest refuses them
 COUNTS = ("outside 0..65535", "raw counts")
 CLF = ["--map", R + "/ds", "--classifier", R + "/run/best.pt"]
@@ -521,7 +561,7 @@ def test_bad_input_is_answered_and_nothing_is_lost(case: Case, world, monkeypatc
     res = invoke(*(a.format(root=root) for a in case.args))
     monkeypatch.undo()
     after = snapshot(root)
-    assert res.exit_code == 2, res.output
+    assert res.exit_code == case.status, res.output
     assert not isinstance(res.exception, Exception), res.exception  # SystemExit(2) only
     assert "Traceback" not in res.output
     missing = [w for w in case.words if w not in res.output]

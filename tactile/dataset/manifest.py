@@ -57,8 +57,24 @@ def make_manifest(config: object, part: str, generator_version: str, seed: int) 
         "generator_version": str(generator_version),
         "seed": int(seed),
     }
-    digest = hashlib.sha256(canonical_json(ident).encode("utf-8")).hexdigest()
-    return {"format": FORMAT, "fingerprint": digest, **ident}
+    return {"format": FORMAT, "fingerprint": fingerprint_of(ident), **ident}
+
+
+def fingerprint_of(manifest: Mapping[str, object]) -> str:
+    """The sha256 of the canonical JSON of a manifest's ``IDENTITY`` fields: its fingerprint,
+    unless the file was edited since it was written."""
+    ident = {k: manifest.get(k) for k in IDENTITY}
+    return hashlib.sha256(canonical_json(ident).encode("utf-8")).hexdigest()
+
+
+def expected_chunks(manifest: Mapping[str, object]) -> int | None:
+    """The chunks a generation run of ``manifest``'s configuration writes, ceil(n / chunk_size);
+    None when its config holds no positive integer ``n`` and ``chunk_size`` (e.g. ingest's)."""
+    config = manifest.get("config")
+    n, size = (config.get(k) if isinstance(config, dict) else None for k in ("n", "chunk_size"))
+    if not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in (n, size)):
+        return None
+    return -(-n // size)
 
 
 def differing_keys(a: object, b: object, prefix: str = "") -> list[str]:

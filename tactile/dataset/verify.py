@@ -3,11 +3,13 @@
     report = verify_dataset("out/forearm")      # Report: ok lines, faults, notes
     report.faults   # ["dataset.h5: field 'image' of sample 5 cannot be read (checksum ...", ...]
 
-Checks, in order: the manifest's content hash of ``dataset.h5`` and ``info.json``; the fields
-(schema dtypes, shapes over N, H, W, T); every field of every sample read (HDF5 fletcher32
-checksums and gzip streams) with label ranges and finite floats; the map and layout; the
+Checks, in order: the manifest's fingerprint and content hash of ``dataset.h5`` and ``info.json``
+(each JSON value's shape first, `tactile.dataset.sidecars`); the fields (schema dtypes, shapes
+over N, H, W, T); every field of every sample read (HDF5 fletcher32 checksums and gzip
+streams) with label ranges and finite floats; the map and layout; the
 train/test split (indices in range, disjoint, covering every sample, no subject or instance on
-both sides); ``info.json`` and the root attributes; the files in ``chunks/`` when still there.
+both sides); ``info.json`` and the root attributes; the files in ``chunks/`` when still there. A
+run not merged yet: its manifest, and its chunks against those its configuration writes.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from tactile.dataset.damage import bad_rows, open_h5, read_error, repair_hint
 from tactile.dataset.folder import CHUNKS, DATASET, INFO, STATIC, list_chunks
 from tactile.dataset.manifest import CONTENT, FORMAT, MANIFEST, file_digest, read_manifest
 from tactile.dataset.schema import BY_NAME, FIELDS, REQUIRED, STR, Dims
+from tactile.dataset.sidecars import digest_fault, fingerprint_faults, json_kind, run_chunk_faults
 from tactile.errors import DataError
 
 MAX_LISTED = 10  # damaged samples listed per field; the rest counted
@@ -61,6 +64,7 @@ def verify_dataset(path: str | Path, progress: bool = False) -> Report:
     path = Path(path)
     if path.is_dir() and not (path / DATASET).exists() and list_chunks(path):
         report = Report(path / DATASET, notes=[f"no {DATASET} yet (not merged): chunks only"])
+        _run(path, report)
         _chunks(path, report, progress)
         return report
     file = dataset_file(path)
@@ -88,6 +92,19 @@ def verify_dataset(path: str | Path, progress: bool = False) -> Report:
     return report
 
 
+def _run(folder: Path, report: Report) -> None:
+    """An unmerged run's manifest, and its chunks against those its configuration writes."""
+    try:
+        manifest = read_manifest(folder)
+    except DataError as err:
+        report.faults.append(str(err))
+        return
+    report.check(fingerprint_faults(folder, manifest), f"{MANIFEST}: fingerprint")
+    faults, notes = run_chunk_faults(folder, manifest)
+    report.notes += notes
+    report.check(faults, f"{CHUNKS}/: the chunks of the run in {MANIFEST}")
+
+
 def _content(file: Path, report: Report) -> None:
     """The manifest's digests of dataset.h5 and info.json against the files."""
     if not (file.parent / MANIFEST).is_file():
@@ -98,12 +115,23 @@ def _content(file: Path, report: Report) -> None:
     except DataError as err:
         report.faults.append(str(err))
         return
+    report.check(fingerprint_faults(file.parent, manifest), f"{MANIFEST}: fingerprint")
     recorded = manifest.get(CONTENT)
-    if not isinstance(recorded, dict):
+    if recorded is None:
         report.notes.append(f"{MANIFEST} records no content hash (merged by an older handskin)")
+        return
+    where = f"{file.parent / MANIFEST}: content"
+    if not isinstance(recorded, dict):
+        report.faults.append(
+            f"{where} is {json_kind(recorded)}, not an object. {repair_hint(file)}"
+        )
         return
     faults = []
     for name, want in recorded.items():
+        fault = digest_fault(want) if name in (DATASET, INFO) else "not a file of the dataset"
+        if fault is not None:
+            faults.append(f"{where} {name!r}: {fault}: the file was edited. {repair_hint(file)}")
+            continue
         target = file.parent / name
         got = file_digest(target) if target.is_file() else None
         if got != want:
@@ -239,7 +267,14 @@ def _info(f: h5py.File, file: Path, fields: list[str], n: int) -> list[str]:
         info = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as err:
         return [*out, f"{path} cannot be read ({err}). {repair_hint(file)}"]
-    if info.get("n_samples") != n or sorted(info.get("fields", {})) != sorted(fields):
+    if not isinstance(info, dict) or not isinstance(info.get("fields"), dict):
+        what = (
+            json_kind(info)
+            if not isinstance(info, dict)
+            else f"fields {json_kind(info.get('fields'))}"
+        )
+        return [*out, f"{path}: {what}, not the sidecar merge writes. {repair_hint(file)}"]
+    if info.get("n_samples") != n or sorted(info["fields"]) != sorted(fields):
         out.append(f"{path}: its samples or fields differ from {file.name}'s. {repair_hint(file)}")
     return out
 
