@@ -137,8 +137,9 @@ def validation_split(ds: Dataset, fraction: float, seed: int) -> tuple[Dataset, 
     if fraction <= 0:
         return ds, None
     cls, subject, instance = group_ids(ds)
-    if cls is not None:
-        cls = (np.asarray(cls) > 0).astype(np.int64) if cls.max(initial=0) <= 1 else None
+    if cls is not None:  # hand / non-hand strata; more classes (image folders): one stratum
+        cls = np.asarray(cls) > 0 if cls.max(initial=0) <= 1 else np.zeros(len(cls))
+        cls = cls.astype(np.int64)
     split = split_indices(
         cls,
         subject,

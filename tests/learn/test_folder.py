@@ -88,3 +88,18 @@ def test_taislab_hand_vs_rest(shared_data):
     result = fit(run, data, None, progress=False)
     scores = evaluate_tensors(result.model, data.test, 2).metrics
     assert scores["mean_accuracy"] > 0.8  # balanced chance: 0.5; hands are 9 % of the images
+
+
+def test_every_folder_its_own_class_keeps_a_validation_split(folder):
+    """A folder of more than two classes (TaISLab's 22) is split for validation per image, as
+    two classes are: no split is left empty (it was: "a data split is empty")."""
+    run = RunConfig(
+        model=ModelConfig("handsnet", 3, input_size=(10, 14)),
+        train=TrainConfig(epochs=1, batch_size=4),
+        flips=False,
+        val_fraction=0.3,
+    )
+    data = load_data(folder, run, progress=False)
+    assert data.class_names == ("a", "b", "c")
+    assert len(data.val.y) > 0 and len(data.train.y) > len(data.val.y)
+    assert len(data.train.y) + len(data.val.y) == 12  # the 12 train images, each used once
