@@ -116,11 +116,23 @@ def read_toml(path: str | Path) -> dict[str, Any]:
     """The table of a TOML file; ConfigError when it is missing or not valid TOML."""
     path = Path(path)
     try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
+        data = path.read_bytes()
     except FileNotFoundError as err:
         raise ConfigError(f"config file {path} does not exist") from err
+    except IsADirectoryError as err:
+        raise ConfigError(f"config file {path} is a folder. Fix: give the TOML file") from err
+    try:
+        return tomllib.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as err:
+        raise ConfigError(
+            f"{path}: not a TOML file (byte 0x{data[err.start]:02x} at offset {err.start} is not "
+            "UTF-8 text; a binary file?). Fix: give the configuration as a TOML text file"
+        ) from None
     except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{path}: not valid TOML ({err}); fix the syntax at that line") from err
+        other = "" if path.suffix == ".toml" else f" (a {path.suffix or 'suffix-less'} file)"
+        raise ConfigError(
+            f"{path}: not valid TOML{other} ({err}); fix the syntax at that line"
+        ) from err
 
 
 def load_config(path: str | Path, cls: type[T]) -> T:

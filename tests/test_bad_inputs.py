@@ -80,7 +80,19 @@ def world(tmp_path_factory) -> dict[str, Path]:
     (root / "text.jpg").write_text("not an image either\n")
     _frames_and_links(root, w)
     _edited_sidecars(root, w)
+    _configs_and_surfaces(root)
     return w
+
+
+def _configs_and_surfaces(root: Path) -> None:
+    """A run TOML naming an arch, a generation no taxel can answer, a skin whose noise hides
+    every press, taxels covering a sphere (a closed surface)."""
+    (root / "vgg.toml").write_text(RUN.replace("[model]\n", '[model]\narch = "vgg16"\n'))
+    deaf = SMALL.replace("max_attempts = 20", "max_attempts = 2\nactive_pa = 999999.0")
+    (root / "deaf.toml").write_text(deaf)
+    (root / "noisy.toml").write_text(SMALL + "[episode.skin]\nnoise_std_counts = 60000.0\n")
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=0.05).vertices
+    np.savetxt(root / "sphere.csv", sphere, delimiter=",", header="x_m,y_m,z_m", comments="")
 
 
 def _edited_sidecars(root: Path, w: dict) -> None:
@@ -520,6 +532,45 @@ OUTPUT_CASES = [
     Case("assets-out-dataset", ["assets", "--out", R + "/ds"], ("dataset folder",)),
 ]
 CASES += OUTPUT_CASES
+# configuration files and numbers read at the boundary, in the words of the flag typed
+T = ["train", R + "/ds", "--out", R + "/t"]
+CASES += [
+    Case(
+        "generate-config-binary",
+        ["generate", "--out", R + "/g", "--config", R + "/binary.csv"],
+        ("binary.csv: not a TOML file", "binary"),
+    ),
+    Case("train-config-binary", [*T, "--config", R + "/binary.csv"], ("not a TOML file",)),
+    Case("train-seed-negative", [*T, "--seed", "-1"], ("--seed -1 is out of range",)),
+    Case("train-seed-too-large", [*T, "--seed", str(2**70)], ("--seed", "out of range")),
+    Case(
+        "train-cv-folds-1",
+        [*T, "--cv-grid", "train.lr=0.1,0.01", "--cv-folds", "1"],
+        ("--cv-folds 1",),
+    ),
+    Case(
+        "train-arch-against-toml",
+        [*T, "--config", R + "/vgg.toml", "--arch", "handsnet"],
+        ("--arch handsnet", "'vgg16'", "drop --arch"),
+    ),
+    Case(
+        "train-hand-classes-dataset",
+        [*T, "--hand-classes", "hand"],
+        ("--hand-classes hand", "handskin dataset"),
+    ),
+    Case(
+        "stream-threshold-nan",
+        ["stream", "--map", R + "/ds", "--classifier", R + "/run/best.pt", "--threshold-pa", "nan"],
+        ("--threshold-pa",),
+    ),
+    Case("map-closed-surface", ["map", R + "/sphere.csv"], ("closed surface", "strip")),
+    Case(
+        "generate-no-taxel-answers",
+        ["generate", "--out", R + "/deaf", "--config", R + "/deaf.toml", "--no-progress"],
+        ("episode.active_pa (now 999999 Pa", "max_attempts"),
+        writes=True,
+    ),
+]
 # verify reads each sidecar's structure before using it: a fault (status 1), no traceback
 CASES += [
     Case("verify-info-null", ["verify", R + "/info_null"], ("info.json: null",), status=1),
@@ -595,3 +646,19 @@ def test_the_output_rule_knows_every_file_of_a_dataset_and_a_run(world) -> None:
     assert {p.name for p in world["run"].iterdir()} <= set(files.RUN_FILES)
     assert files.folder_kind(world["ds"])[0] == "dataset"
     assert files.folder_kind(world["run"])[0] == "run"
+
+
+def test_output_that_is_nonsense_is_said(world, tmp_path) -> None:
+    """A generation whose every image is blank (a skin noise that hides each press) and a canvas
+    that cuts away most of the map are warned in the user's words; the command still runs."""
+    config = ("--config", world["root"] / "noisy.toml", "--workers", 1, "--no-progress")
+    res = invoke("generate", "--out", tmp_path / "g", *config)
+    assert res.exit_code == 0, res.output
+    assert "warning: 12 of 12 tactile images are blank" in res.output, res.output
+    assert "noise_std_counts" in res.output
+    res = invoke("generate", "--out", tmp_path / "fine", "--config", world["root"] / "small.toml")
+    assert res.exit_code == 0 and "warning" not in res.output, res.output
+    run = ("--config", world["root"] / "run.toml", "--no-progress")
+    res = invoke("train", world["ds"], "--out", tmp_path / "t", *run, "--canvas-mm", "10,10")
+    assert res.exit_code == 0, res.output
+    assert "warning: the canvas of 10 x 10 mm" in res.output and "% of the" in res.output

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from pathlib import Path
 
 import typer
@@ -20,11 +21,14 @@ from learn.cli.options import (
     hand_classes,
     opt,
 )
-from tactile.config import to_dict
+from tactile.config import read_toml, to_dict
+from tactile.dataset.folder import DATASET
+from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, HandskinError, require_folder
 from tactile.files import os_error_text, require_output, write_text_atomic
 
 CLASSICAL = ("bovw", "vgg_svm")  # as learn.classical.svm.CLASSICAL (not imported: fast --help)
+MAX_SEED = 2**63 - 1  # torch's seeds are 64-bit signed integers
 
 
 def parse_canvas(text: str) -> tuple[float, float]:
@@ -58,12 +62,57 @@ def resolve_run(
     return run
 
 
+def check_numbers(seed: int | None, folds: int) -> None:
+    """ConfigError naming the flag of a number out of its range, before any work
+    (--stop-after-epoch: `learn.train.state.check_stop`, against the run's epochs)."""
+    if seed is not None and not 0 <= seed <= MAX_SEED:
+        raise ConfigError(f"--seed {seed} is out of range; allowed [0, {MAX_SEED}]")
+    if folds < 2:
+        raise ConfigError(f"--cv-folds {folds} is out of range; allowed >= 2 (each held out once)")
+
+
+def choose_arch(arch: str | None, config: Path | None) -> str:
+    """``--arch``, else the ``--config`` TOML's ``[model] arch``, else handsnet; ConfigError when
+    both are given and differ (one would silently override the other)."""
+    model = read_toml(config).get("model") if config is not None else None
+    in_toml = model.get("arch") if isinstance(model, dict) else None
+    if arch is not None and in_toml is not None and arch != in_toml:
+        raise ConfigError(
+            f"--arch {arch} against [model] arch = {in_toml!r} in {config}: which one should "
+            f"train? Fix: drop --arch (then {in_toml} trains) or change the TOML's arch"
+        )
+    return arch or in_toml or "handsnet"
+
+
+def is_dataset_path(data: Path) -> bool:
+    """A handskin dataset folder (or its dataset.h5), not an image folder."""
+    return (data / DATASET).is_file() or (data.is_file() and data.suffix == ".h5")
+
+
+def warn_crop(canvas_mm: tuple[float, float], data: Path) -> None:
+    """A warning when the model's canvas keeps less than half of DATASET's map: most prints
+    would be cut away (centred on a canvas smaller than the map)."""
+    with open_dataset(data) as ds:
+        h_mm, w_mm = (n * ds.map.step_mm for n in ds.map.shape)
+    kept = min(canvas_mm[0], h_mm) * min(canvas_mm[1], w_mm) / (h_mm * w_mm)
+    if kept < 0.5:
+        warnings.warn(
+            f"the canvas of {canvas_mm[0]:g} x {canvas_mm[1]:g} mm (--canvas-mm or "
+            f"model.canvas_mm) keeps {100 * kept:.1f} % of the {h_mm:.0f} x {w_mm:.0f} mm map "
+            f"of {data}: the rest of each print is cut away. Fix: a canvas as large as the "
+            f"map, e.g. --canvas-mm {h_mm:.0f},{w_mm:.0f}",
+            stacklevel=2,
+        )
+
+
 def train_command(
     data: DataArg,
     out: opt(Path, "Run folder: best.pt, last.pt, curves.png, run.toml, test_metrics.json."),
     arch: opt(
-        str, "handsnet | vgg16 | segnet | fcn16s | action_3d, or bovw | vgg_svm."
-    ) = "handsnet",
+        str | None,
+        "handsnet | vgg16 | segnet | fcn16s | action_3d, or bovw | vgg_svm (default: the "
+        "--config's [model] arch, else handsnet).",
+    ) = None,
     config: opt(
         Path | None, "TOML run config laid over the arch's preset (docs/learning.md)."
     ) = None,
@@ -97,6 +146,13 @@ def train_command(
         check_data(data)
         require_folder(out)
         require_output(out, "--out", reads=[data, config, init], folder=True, makes="run")
+        check_numbers(seed, cv_folds)
+        if hand and is_dataset_path(data):
+            raise ConfigError(
+                f"--hand-classes {hand_names}: names the hand folders of an image folder, but "
+                f"{data} is a handskin dataset, whose samples say hand or not. Fix: drop it"
+            )
+        arch = choose_arch(arch, config)
         if arch in CLASSICAL:
             network_only = {"--batch-size": batch_size, "--lr": lr, "--val-fraction": val_fraction}
             network_only |= {"--precision": precision, "--device": device, "--test-c": test_c}
@@ -112,6 +168,8 @@ def train_command(
         changes = {"epochs": epochs, "batch_size": batch_size, "lr": lr, "seed": seed}
         changes |= {"val_fraction": val_fraction, "precision": precision, "device": device}
         run = resolve_run(arch, config, changes, test_c, canvas_mm)
+        if run.model.canvas_mm is not None and is_dataset_path(data):
+            warn_crop(run.model.canvas_mm, data)
         _train(
             run,
             data,

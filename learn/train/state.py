@@ -95,7 +95,7 @@ def check_stop_epoch(
         return
     if not 1 <= stop_after_epoch <= epochs:
         raise ConfigError(
-            f"stop after epoch {stop_after_epoch}: the run's epochs are 1 to "
+            f"--stop-after-epoch {stop_after_epoch}: the run's epochs are 1 to "
             f"{epochs}. Fix: give one of them (the schedule's length is "
             "train.epochs)"
         )

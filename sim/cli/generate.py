@@ -196,6 +196,9 @@ def generate_command(
     )
     if run.dataset:
         typer.echo(split_line(run.dataset))
+        blank = blank_warning(run.dataset)
+        if blank:
+            typer.echo(f"warning: {blank}", err=True)
 
 
 def warp_options(
@@ -221,6 +224,25 @@ def split_line(dataset: Path) -> str:
         f"split ({method}): {n - len(test)} train / {len(test)} test samples "
         f"({100 * (n - len(test)) / max(n, 1):.1f} % train); held out: {groups[0]} subjects, "
         f"{groups[1]} object / body-part instances"
+    )
+
+
+def blank_warning(dataset: Path) -> str | None:
+    """Words for a dataset whose tactile images are mostly blank (no pixel above 0): its skin
+    reads no press above its noise floor, or saturates; None when most images show a print."""
+    with open_dataset(dataset) as ds:
+        images, step = ds["image"], 256  # images read 256 at a time: memory stays flat
+        blank = sum(
+            int((images[i : i + step].reshape(-1, images[0].size).max(1) == 0).sum())
+            for i in range(0, len(images), step)
+        )
+        n, floor = len(images), float(ds.attrs.get("skin_noise_floor_counts", 0.0))
+    if blank * 2 <= n:
+        return None
+    return (
+        f"{blank} of {n} tactile images are blank (no pixel above 0): the skin reads no press "
+        f"above its noise floor ({floor:g} counts; a reading ends at 65535) or saturates. "
+        "Fix: check episode.skin in the configuration (noise_std_counts, full_scale_pa)"
     )
 
 

@@ -317,11 +317,18 @@ def check_contact(ctx: EpisodeContext, frames: Frames) -> None:
 
 def attempts_exhausted(index: int, seed: int, ctx: EpisodeContext, rejects: Counter) -> ConfigError:
     """The error of sample ``index`` whose ``max_attempts`` attempts all failed (by reason)."""
-    fix = (
-        "lower episode.min_active_taxels or raise episode.max_attempts"
-        if rejects["few_taxels"]
-        else "check the contactor's force and max_penetration_m, or raise max_attempts"
-    )
+    cfg = ctx.cfg
+    fixes = {  # the commonest reason's setting, in the configuration's words
+        "few_taxels": f"lower episode.min_active_taxels (now {cfg.min_active_taxels})",
+        "no_contact": f"lower episode.active_pa (now {cfg.active_pa:g} Pa; a taxel counts above "
+        "it) or check episode.skin (a stiffer or less sensitive skin reads less)",
+        "too_deep": "stiffen the skin (episode.skin.stiffness_pa_per_m): contactors sank deeper "
+        "than their tissue allows",
+        "nan": "lower episode.timestep_s or raise episode.solver_iterations (the simulation "
+        "diverged)",
+    }
+    reason = max(rejects, key=rejects.get) if rejects else "no_contact"
+    fix = f"{fixes.get(reason, fixes['nan'])}, or raise episode.max_attempts"
     return ConfigError(
         f"sample {index} (seed {seed}) failed {ctx.cfg.max_attempts} attempts: {dict(rejects)}. "
         f"Fix: {fix}"

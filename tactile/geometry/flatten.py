@@ -112,6 +112,12 @@ def _flatten_patch(
     """Flatten one patch: (uv (v, 2) mm, taxel (v,), local faces (m, 3), seams cut)."""
     used, local = np.unique(faces, return_inverse=True)
     faces, taxel = local.reshape(-1, 3), vertex_taxel[used]
+    if not boundary_loops(faces):
+        raise MapError(
+            f"{len(taxel)} taxels cover a closed surface (no edge, as on a sphere), which no "
+            "map lays flat without a cut. Fix: leave out a strip of taxels so that the "
+            "covering has an edge, or map the halves as two layouts"
+        )
     uv = parameterize(xyz_mm[taxel], faces, method)
     n_seams = 0
     loops = boundary_loops(faces)
@@ -183,7 +189,10 @@ def _lscm(xyz_mm: np.ndarray, faces: np.ndarray) -> np.ndarray:
     a = int(np.argmax(np.linalg.norm(xyz_mm - xyz_mm.mean(axis=0), axis=1)))
     b = int(np.argmax(np.linalg.norm(xyz_mm - xyz_mm[a], axis=1)))
     d = float(np.linalg.norm(xyz_mm[b] - xyz_mm[a]))
-    uv, _ = igl.lscm(xyz_mm, faces, np.array([a, b]), np.array([[0.0, 0.0], [d, 0.0]]))
+    try:
+        uv, _ = igl.lscm(xyz_mm, faces, np.array([a, b]), np.array([[0.0, 0.0], [d, 0.0]]))
+    except RuntimeError:  # "igl::lscm failed": a failed solve, as NaN is (`parameterize`)
+        return np.full((len(xyz_mm), 2), np.nan)
     return uv
 
 
