@@ -2,6 +2,7 @@
 path, and frames per second of `handskin stream` end to end on the loopback.
 
     python benchmarks/bench_stream.py DATA --classifier C.pt --segmenter S.pt [--frames 10000]
+        [--network N.pt ...]
 
 DATA's test split gives the frames (raw counts to Pa as the dataset converts them; every one a
 touch, cycled to ``--frames``). With one torch and one BLAS thread, each path answers the frames
@@ -17,6 +18,9 @@ per frame against the targets (full answer 5 ms median and 8 ms p99, the classif
 from `predict_frame`'s; then `handskin stream --compile` fed ``--stream-frames`` frames as fast
 as they go through a pipe on standard input and through ZeroMQ on 127.0.0.1, in answered frames
 per second.
+Each ``--network`` is a candidate for the full answer, timed beside them: a class-and-parts
+network (``handparts``) alone, or a segmenter paired with the compiled classifier, each on the
+frame path and compiled, with its differences from its own `predict_frame`.
 Latency does not depend on the weights: networks trained briefly are fine for the timings.
 """
 
@@ -48,6 +52,26 @@ from tactile.dataset import open_dataset
 
 TARGET_MS = {"both": (5.0, 8.0), "classifier": (1.5, None)}  # (median, p99) ms, one core
 BLOCK = 500  # frames a path answers before the next takes its turn
+
+
+def candidate_paths(tmap, networks: list[Path], clf_path: Path) -> dict[str, Callable]:
+    """name -> step(p) of each candidate network (``cand <run folder>``): its `predict_frame`
+    (the reference of its differences) and its compiled frame path; a segmenter answers with
+    the classifier of ``clf_path``, a class-and-parts network alone."""
+    clf = load_predictor(clf_path)
+    clf_c = compiled(clf)
+    out = {}
+    for path in networks:
+        pred = load_predictor(path)
+        name = f"cand {path.parent.name}"
+        pair = (pred, None) if pred.task == "both" else (clf, pred)
+        out[f"{name} old predict_frame"] = lambda p, c=pair: predict_frame(p, tmap, *c)
+        fast = (compiled(pred), None) if pred.task == "both" else (clf_c, compiled(pred))
+        out[f"{name} frame path compiled"] = Recognizer(tmap, *fast).step
+        out[f"{'network':10s} {name} alone"] = network_alone(
+            fast[0] if pred.task == "both" else fast[1]
+        )
+    return out
 
 
 def paths(tmap, clf_path: Path, seg_path: Path) -> dict[str, Callable]:
@@ -105,7 +129,7 @@ def latencies(steps: dict[str, Callable], frames: np.ndarray, n: int, n_old: int
 
 
 def verdict(name: str, ms: np.ndarray) -> str:
-    combo = name.split()[0]
+    combo = "both" if name.startswith("cand") else name.split()[0]
     median, p99 = TARGET_MS.get(combo, (None, None))
     out = "" if median is None else f"  median/{median:g} ms = {np.median(ms) / median:.2f}"
     return out + ("" if p99 is None else f", p99/{p99:g} ms = {np.percentile(ms, 99) / p99:.2f}")
@@ -132,14 +156,14 @@ def differences(steps: dict[str, Callable], frames: np.ndarray, tmap) -> None:
     ref = {}
     for name, step in steps.items():
         if "old" in name:
-            ref[name.split()[0]] = [step(p) for p in frames]
+            ref[reference_of(name)] = [step(p) for p in frames]
     labelled = sum(int((r.taxel_labels > 0).sum()) for r in ref["both"])
     print(f"\nagainst predict_frame on the {len(frames)} test frames ({labelled} taxels labelled):")
     for name, step in steps.items():
         if "old" in name or name.startswith("network"):
             continue
         flips, taxels, in_frames = [], 0, 0
-        for p, r in zip(frames, ref[name.split()[0]], strict=True):
+        for p, r in zip(frames, ref[reference_of(name)], strict=True):
             a = step(p)
             if a.class_name != r.class_name:
                 flips.append(r.probability)
@@ -151,6 +175,12 @@ def differences(steps: dict[str, Callable], frames: np.ndarray, tmap) -> None:
             f"  {name:44s} classes differ {len(flips)}{near}, taxel labels {taxels} in "
             f"{in_frames} frames"
         )
+
+
+def reference_of(name: str) -> str:
+    """The `predict_frame` path a frame path is compared with: its combination, or its
+    candidate (``cand <run>``)."""
+    return " ".join(name.split()[:2]) if name.startswith("cand") else name.split()[0]
 
 
 def free_address() -> str:
@@ -218,6 +248,10 @@ def main() -> None:
         "--old-frames", type=int, default=2_000, help="of predict_frame, of a network alone"
     )
     parser.add_argument("--stream-frames", type=int, default=2_000, help="per stream test")
+    parser.add_argument(
+        "--network", type=Path, action="append", default=[], help="a candidate .pt (repeatable)"
+    )
+    parser.add_argument("--json", type=Path, help="write the latencies (ms) here")
     args = parser.parse_args()
     torch.set_num_threads(1)
     tmap, _, to_pa = load_map(args.data)
@@ -232,7 +266,18 @@ def main() -> None:
     print("load average (1, 5, 15 min) at the start: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
     print("latency does not depend on the weights: briefly trained networks time alike")
     steps = paths(tmap, args.classifier, args.segmenter)
-    print_latencies(latencies(steps, frames, args.frames, args.old_frames))
+    steps |= candidate_paths(tmap, args.network, args.classifier)
+    times = latencies(steps, frames, args.frames, args.old_frames)
+    print_latencies(times)
+    if args.json:
+        summary = {
+            name: {
+                "median_ms": float(np.median(ms[:, 0])),
+                "p99_ms": float(np.percentile(ms[:, 0], 99)),
+            }
+            for name, ms in times.items()
+        }
+        args.json.write_text(json.dumps(summary, indent=1))
     print("load average at the end of the timing: {:.2f} {:.2f} {:.2f}".format(*os.getloadavg()))
     differences(steps, frames, tmap)
     lines = [",".join(map(str, r)).encode() for r in raw.astype(np.int64)]

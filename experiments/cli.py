@@ -6,6 +6,7 @@ import typer
 
 from experiments import (
     EXPERIMENTS,
+    candidates,
     fault_aware,
     fidelity,
     pareto,
@@ -15,7 +16,7 @@ from experiments import (
 )
 
 #: the experiment modules; importing one registers its commands (`experiments.experiment`)
-MODULES = (robustness, fault_aware, transfer, pareto, fidelity, real_finetune)
+MODULES = (robustness, fault_aware, transfer, pareto, fidelity, real_finetune, candidates)
 
 
 def register(root: typer.Typer) -> None:
@@ -23,7 +24,7 @@ def register(root: typer.Typer) -> None:
     app = typer.Typer(
         name="experiment",
         help="Experiments: robustness-a, robustness-b, fault-aware, transfer, pareto, fidelity, "
-        "real-finetune. "
+        "real-finetune, candidates. "
         "Each writes a folder with report.md, results.json and PNG charts.",
         no_args_is_help=True,
     )

@@ -25,6 +25,8 @@ TASK_OF_ARCH = {
     "segnet": "segment",
     "fcn16s": "segment",
     "action_3d": "action",  # the action of a press from its sequence (learn.models.action)
+    "compactseg": "segment",  # the compact segmenter (learn.models.compact)
+    "handparts": "both",  # class and parts in one pass (learn.models.compact)
 }
 OPTIMIZERS = ("sgdm", "adam", "adamw")
 LOSSES = ("ce", "weighted_ce", "dice", "generalized_dice", "ce_dice")
@@ -58,7 +60,8 @@ def _require(ok: bool, message: str) -> None:
 class ModelConfig:
     """Which network to build (``learn.models.create_model``) and its size."""
 
-    # handsnet, vgg16 (classifiers), segnet, fcn16s (segmenters), action_3d (actions)
+    # handsnet, vgg16 (classifiers), segnet, fcn16s, compactseg (segmenters), handparts (class
+    # and parts), action_3d (actions)
     arch: str = "handsnet"
     num_classes: int = 2  # 2 = hand / non-hand; 7 = background + 5 fingers + palm; 8 actions
     in_channels: int = 1  # tactile images are grey
@@ -184,14 +187,14 @@ class RunConfig:
             f"precision {self.precision!r} (--precision) is not a number format. Fix: fp32 or bf16",
         )
         _require(
-            not (self.task != "segment" and self.train.loss.endswith("dice")),
+            not (self.task not in ("segment", "both") and self.train.loss.endswith("dice")),
             f"train.loss {self.train.loss!r} is for segmentation; a classifier takes ce or "
             "weighted_ce",
         )
 
     @property
     def task(self) -> str:
-        """``"classify"``, ``"segment"`` or ``"action"``, from the architecture."""
+        """``"classify"``, ``"segment"``, ``"both"`` or ``"action"``, from the architecture."""
         return TASK_OF_ARCH[self.model.arch]
 
 
@@ -279,6 +282,14 @@ ACTION_3D = RunConfig(
     eval_batch_size=32,
 )
 
+#: The compact segmenter (*ours*): SegNet's CPU recipe (Adam, weighted CE, batch 16, 30 epochs,
+#: lr x 0.2 after 20), the encoder-decoder of `learn.models.compact` at width 1.
+COMPACTSEG = dataclasses.replace(SEGNET, model=ModelConfig("compactseg", 7, width=1.0))
+
+#: Class and parts in one pass (*ours*): the compact segmenter with a hand / non-hand head,
+#: trained on every image (parts on the hands', `learn.train.losses.BothLoss`), same recipe.
+HANDPARTS = dataclasses.replace(SEGNET, model=ModelConfig("handparts", 7, width=1.0))
+
 #: the preset of each network (``handskin train --arch``'s default configuration)
 PRESET_OF_ARCH = {
     "handsnet": HANDSNET,
@@ -286,6 +297,8 @@ PRESET_OF_ARCH = {
     "segnet": SEGNET,
     "fcn16s": FCN16S,
     "action_3d": ACTION_3D,
+    "compactseg": COMPACTSEG,
+    "handparts": HANDPARTS,
 }
 
 #: Fine-tuning of the paper's Test C: lr x 0.1 on the first two convolutions, lr 0.01 halved
@@ -302,7 +315,7 @@ FINETUNE_TEST_C = TrainConfig(
 
 def metric_name(task: str) -> str:
     """The validation metric that selects the best epoch: accuracy or mean IoU."""
-    return "mean_iou" if task == "segment" else "accuracy"
+    return {"segment": "mean_iou", "both": "class_and_parts"}.get(task, "accuracy")
 
 
 def replace_train(run: RunConfig, **changes: object) -> RunConfig:

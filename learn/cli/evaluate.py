@@ -60,7 +60,7 @@ def evaluate_command(
     from learn.classical.run import evaluate_classical
     from learn.classical.svm import load_npz
     from learn.evaluate.report import write_report
-    from learn.evaluate.scoring import eval_jobs, evaluate_job
+    from learn.evaluate.scoring import eval_jobs, evaluate_job, report_rows
     from learn.infer.fastpath import check_timing
     from learn.train.checkpoint import versions
 
@@ -79,7 +79,11 @@ def evaluate_command(
         for m in models:
             load_npz(m)
         jobs = eval_jobs([c for c in checkpoints if c.suffix != ".npz"], tta, ensemble, int8)
-        rows = [evaluate_job(j, data, hand_classes=hand, **timing, progress=progress) for j in jobs]
+        rows = []
+        for j in jobs:
+            rows += report_rows(
+                evaluate_job(j, data, hand_classes=hand, **timing, progress=progress)
+            )
         rows += [
             evaluate_classical(m, data, hand_classes=hand, **timing, progress=progress)
             for m in models

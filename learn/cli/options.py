@@ -40,7 +40,11 @@ HandOpt = opt(
 )
 ClfOpt = Annotated[
     list[Path] | None,
-    typer.Option(metavar="PATH", help="Classifier (.pt); given twice or more: their mean softmax."),
+    typer.Option(
+        metavar="PATH",
+        help="Classifier (.pt), or a class-and-parts network (handparts: it answers both); "
+        "given twice or more: their mean softmax.",
+    ),
 ]
 SegOpt = Annotated[
     list[Path] | None,

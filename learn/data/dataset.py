@@ -29,10 +29,11 @@ from tactile.images.faults import (
     stuck_at,
     zero_taxels,
 )
+from tactile.images.labels import IGNORE
 from tactile.images.resize import NET_SIZE
 from tactile.images.tactile_map import TactileMap
 
-TASKS = ("classify", "segment")
+TASKS = ("classify", "segment", "both")
 SPLITS = ("train", "test")
 MAP_CACHE = 4  # rebuilt maps (taxel removal) kept per worker
 
@@ -108,7 +109,9 @@ class TorchTactileDataset(Dataset):
     Parameters
     ----------
     path : dataset folder or dataset.h5. split : "train", "test" or None (all samples).
-    task : "classify" (target: int64 is_hand) or "segment" (target: (h, w) int64 classes 0..6).
+    task : "classify" (target: int64 is_hand), "segment" (target: (h, w) int64 classes 0..6) or
+        "both" (every sample; target: a hand's label image, a non-hand's all `IGNORE`: its class
+        is that, `learn.train.losses.BothLoss`; inputs as a segmenter's).
     size : (h, w) pixels of the returned images (anti-aliased resize; labels nearest), or None
         for the map's (H, W). flips : True triples the length (original, horizontal flip of the
         columns, vertical flip of the rows; item j is view j % 3 of sample j // 3).
@@ -153,8 +156,12 @@ class TorchTactileDataset(Dataset):
         self._maps: dict[bytes, tuple[np.ndarray, TactileMap]] = {}
 
     def _check_fields(self) -> None:
-        need = {"classify": ["is_hand"], "segment": ["label_image"]}[self.task]
-        if self.faults is not None and self.task == "segment":
+        need = {
+            "classify": ["is_hand"],
+            "segment": ["label_image"],
+            "both": ["label_image", "is_hand"],
+        }[self.task]
+        if self.faults is not None and self.task != "classify":
             need += ["taxel_label", "is_hand"]
         missing = [f for f in need if f not in self.reader.fields]
         if missing:
@@ -176,7 +183,9 @@ class TorchTactileDataset(Dataset):
         i = int(self.indices[base])
         image, labels = self.image_and_labels(i)
         if self.size is not None:
-            x = net_input(image, self.size, self.task, self.canvas)
+            x = net_input(
+                image, self.size, "classify" if self.task == "classify" else "segment", self.canvas
+            )
         else:
             x = image.astype(np.float32) / np.float32(255.0)
         x = torch.from_numpy(np.ascontiguousarray(flip_view(x, PAPER_VIEWS[view])))[None]
@@ -184,6 +193,8 @@ class TorchTactileDataset(Dataset):
             return x, torch.tensor(int(self.reader.is_hand[i]), dtype=torch.int64)
         if self.size is not None:
             labels = net_labels(labels, self.size, self.canvas)
+        if self.task == "both" and not self.reader.is_hand[i]:
+            labels = np.full_like(labels, IGNORE)  # a non-hand: its class, no parts to learn
         labels = np.ascontiguousarray(flip_view(labels, PAPER_VIEWS[view]))
         return x, torch.from_numpy(labels.astype(np.int64))
 
@@ -191,7 +202,7 @@ class TorchTactileDataset(Dataset):
         """Sample i's (H', W') uint8 image and, for segmentation, (H', W') uint8 label image —
         stored, or recomputed through the (possibly rebuilt) map when faults are set."""
         ds = self.reader
-        segment = self.task == "segment"
+        segment = self.task != "classify"
         if self.faults is None:
             return ds.image[i], ds.label_image[i] if segment else None
         keep, tmap = self.faulty_map()

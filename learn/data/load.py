@@ -165,7 +165,7 @@ def load_data(
     path, seed, size = Path(path), run.train.seed, run.model.input_size
     canvas = run.model.canvas_mm
     train_ds = open_split(path, "train", run.task, size, hand_classes, seed, canvas)
-    if run.task == "classify":
+    if run.task in ("classify", "both"):
         check_classes(train_ds, path)
     train_ds, val_ds = validation_split(train_ds, run.val_fraction, seed)
     test_ds = (
@@ -206,6 +206,6 @@ def _len(ds: Dataset | None) -> int:
 
 
 def _class_names(ds: Dataset, task: str) -> tuple[str, ...]:
-    if task == "segment":
+    if task in ("segment", "both"):
         return CLASS_NAMES
     return ds.class_names if isinstance(ds, FolderDataset | SequenceDataset) else HAND_NAMES

@@ -25,6 +25,7 @@ import torch
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
+from learn.data.folder import HAND_NAMES
 from learn.infer.predict import Predictor, load_predictor, segment
 from learn.inputs import net_input
 from learn.numerics import flushing
@@ -50,6 +51,8 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 
 def _hand_index(pred: Predictor) -> int:
+    if pred.task == "both":
+        return HAND_NAMES.index("hand")
     if "hand" not in pred.class_names:
         raise ConfigError(f"the classifier's classes {pred.class_names} have no 'hand'")
     return pred.class_names.index("hand")
@@ -59,7 +62,10 @@ def _hand_index(pred: Predictor) -> int:
 def hand_recall(pred: Predictor, folder: BoxFolder) -> dict:
     """How many of the folder's prints (all hands) the classifier calls hand."""
     hand = _hand_index(pred)
-    said = [int(pred.logits(folder[i].image).argmax()) == hand for i in range(len(folder))]
+    said = []
+    for i in range(len(folder)):
+        logits = pred.logits(folder[i].image)
+        said.append(int((logits[0] if pred.task == "both" else logits).argmax()) == hand)
     k, n = int(sum(said)), len(said)
     return {"hand_recall": k / n, "hand_recall_ci": wilson(k, n), "n_real": n}
 
@@ -76,11 +82,11 @@ def non_hand_specificity(pred: Predictor, negatives: Path) -> dict:
         canvas = pred.canvas(ds.map.step_mm)
         right = 0
         for start in range(0, len(test), BATCH):
-            x = net_input(
-                ds.image[test[start : start + BATCH]], pred.input_size, "classify", canvas
-            )
+            task = "segment" if pred.task == "both" else "classify"
+            x = net_input(ds.image[test[start : start + BATCH]], pred.input_size, task, canvas)
             with torch.inference_mode():
-                said = pred.model(torch.from_numpy(x)[:, None]).argmax(1)
+                out = pred.model(torch.from_numpy(x)[:, None])
+            said = (out[0] if pred.task == "both" else out).argmax(1)
             right += int((said != hand).sum())
     n = len(test)
     return {"specificity": right / n, "specificity_ci": wilson(right, n), "n_non_hand": n}
@@ -157,14 +163,14 @@ def evaluate_real(
         pred = load_predictor(path)
         row = {"checkpoint": str(path), "task": pred.task, "folder": str(folder)}
         row["labels_from"] = "boxes"
-        if pred.task == "classify":
+        if pred.task in ("classify", "both"):
             neg = negatives or _trained_on(path)
             row |= hand_recall(pred, prints) | {"negatives": str(neg)}
             row |= non_hand_specificity(pred, Path(neg))
-        elif pred.task == "segment":
+        if pred.task in ("segment", "both"):
             scores, predictions = part_localisation(pred, prints)
             row |= scores
-        else:
+        if pred.task not in ("classify", "segment", "both"):
             raise ConfigError(f"{path}: a '{pred.task}' network; give a classifier or segmenter")
         rows.append(row)
     return rows, predictions
@@ -187,8 +193,8 @@ def _pct(v: float) -> str:
 def real_markdown(rows: list[dict]) -> list[str]:
     """The report's tables: classifiers, then segmenters (overall and per part)."""
     lines = []
-    clf = [r for r in rows if r["task"] == "classify"]
-    seg = [r for r in rows if r["task"] == "segment"]
+    clf = [r for r in rows if r["task"] in ("classify", "both")]
+    seg = [r for r in rows if r["task"] in ("segment", "both")]
     if clf:
         lines += [
             "## Hand / non-hand",

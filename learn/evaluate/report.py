@@ -32,6 +32,8 @@ ARCH_LABEL = {
     "bovw": "BoVW",
     "ensemble": "Ensemble",
     "action_3d": "3D CNN",
+    "compactseg": "Compact segmenter",
+    "handparts": "HandParts",
 }
 #: The paper's Table 3 (hand / non-hand, % accuracy; ms per image). None: not known to us.
 PAPER_TABLE3 = {

@@ -22,7 +22,7 @@ from learn.infer.fastpath import check_timing, fast_inference, gpu_ms_per_image,
 from learn.infer.int8_file import int8_with_note
 from learn.models import prepare_for_inference
 from learn.train.checkpoint import is_int8, load_checkpoint, model_from_checkpoint, run_of
-from learn.train.validation import EvalResult, evaluate_tensors
+from learn.train.validation import EvalResult, evaluate_tensors, scores
 from tactile.dataset.reader import DATASET
 from tactile.errors import ConfigError
 
@@ -54,6 +54,11 @@ def eval_jobs(
     jobs = []
     for c, ckpt in ckpts.items():
         run = run_of(ckpt, c)
+        if run.task == "both" and (tta or ensemble):
+            raise ConfigError(
+                f"{c} is a class-and-parts network; --tta and --ensemble are for classifiers and "
+                "segmenters. Fix: evaluate it without them"
+            )
         if run.task == "action" and (tta or ensemble):
             raise ConfigError(
                 f"{c} is an action network; --tta and --ensemble are for the image networks. "
@@ -135,7 +140,9 @@ def evaluate_job(
     hand = hand_classes or (first.ckpt.get("data") or {}).get("hand_classes")
     test = read_test_split(Path(data_path), run, hand, progress)
     n_cls, size = run.model.num_classes, run.model.input_size
-    contacts = split_contacts(Path(data_path), run.task, size, run.model.canvas_mm)
+    canvas = run.model.canvas_mm
+    both = run.task == "both"  # class and parts: no scores by contacts (their rows are split)
+    contacts = None if both else split_contacts(Path(data_path), run.task, size, canvas)
     keep = contacts is not None  # eval mode's predictions, scored by number of contacts
     int8 = job.int8 or is_int8(first.ckpt)
     int8_note = None
@@ -188,7 +195,22 @@ def evaluate_job(
         row["members"] = [member_record(m) for m in members]
     if contacts is not None:
         row |= contact_scores(ref.predictions, test.y, contacts, run.task, n_cls)
+    if run.task == "both":
+        row |= {"class_cm": ref.class_cm.tolist(), "fast_class_cm": res.class_cm.tolist()}
     return row
+
+
+def report_rows(row: dict) -> list[dict]:
+    """The report's rows of one evaluated network: itself, or a class-and-parts network's two
+    (a classify row over every test image, a segment row over the hands), each marked
+    ``one_pass`` with the one pass's time."""
+    if row["task"] != "both":
+        return [row]
+    classify = {**row, "task": "classify", "class_names": ["non_hand", "hand"], "one_pass": True}
+    classify |= {"cm": row["class_cm"], "metrics": scores(row["class_cm"])}
+    classify["fast_metrics"] = scores(row["fast_class_cm"])
+    segment = {**row, "task": "segment", "one_pass": True}
+    return [classify, segment]
 
 
 def member_record(m: Member) -> dict:

@@ -43,10 +43,12 @@ class FastInference(nn.Module):
             if hasattr(prepared, name):
                 setattr(self, name, getattr(prepared, name))
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """``(B, C, H, W)`` → logits of the wrapped model, float32."""
+    def forward(self, x: torch.Tensor):
+        """``(B, C, H, W)`` → logits of the wrapped model, float32 (a tuple of them for a
+        class-and-parts network)."""
         dtype = torch.bfloat16 if self.bf16 else torch.float32
-        return self.net(x.to(dtype).contiguous(memory_format=torch.channels_last)).float()
+        out = self.net(x.to(dtype).contiguous(memory_format=torch.channels_last))
+        return tuple(o.float() for o in out) if isinstance(out, tuple) else out.float()
 
 
 def clear_disagreements(a: nn.Module, b: nn.Module, x: torch.Tensor, tie_gap: float) -> int:

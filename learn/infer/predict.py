@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from matplotlib.figure import Figure
 
-from learn.data.folder import read_grey
+from learn.data.folder import HAND_NAMES, read_grey
 from learn.data.load import is_dataset
 from learn.infer.ensemble import FlipTTA, MeanSoftmax, load_members, tta_views
 from learn.infer.fastpath import fast_inference
@@ -45,7 +45,7 @@ class Predictor:
     """A trained network on the fast inference path, with its input size and class names."""
 
     model: torch.nn.Module
-    task: str  # "classify" | "segment"
+    task: str  # "classify" | "segment" | "both" (class and parts in one pass)
     input_size: tuple[int, int]  # (h, w) px of the network input
     class_names: tuple[str, ...]
     canvas_mm: tuple[float, float] | None = None  # ModelConfig.canvas_mm: (H, W) mm, or None
@@ -54,12 +54,15 @@ class Predictor:
         """(H', W') map pixels of the model's canvas on a grid of ``step_mm`` mm, or None."""
         return input_canvas(self.canvas_mm, step_mm)
 
-    def logits(self, image: np.ndarray, step_mm: float = 1.0) -> torch.Tensor:
+    def logits(self, image: np.ndarray, step_mm: float = 1.0):
         """Logits of one (H, W) uint8 image on a map grid of ``step_mm`` mm per pixel (used
-        only with a canvas), made into the network input: (C,) or (C, h, w)."""
-        x = net_input(np.asarray(image, np.uint8), self.input_size, self.task, self.canvas(step_mm))
+        only with a canvas), made into the network input: (C,) or (C, h, w); for a
+        class-and-parts network the pair ((2,), (C, h, w))."""
+        task = "classify" if self.task == "classify" else "segment"
+        x = net_input(np.asarray(image, np.uint8), self.input_size, task, self.canvas(step_mm))
         with torch.inference_mode(), flushing():
-            return self.model(torch.from_numpy(x)[None, None])[0].float()
+            out = self.model(torch.from_numpy(x)[None, None])
+        return tuple(o[0].float() for o in out) if isinstance(out, tuple) else out[0].float()
 
 
 def load_predictor(
@@ -122,16 +125,19 @@ class Prediction:
 def classify(pred: Prediction, clf: Predictor, step_mm: float = 1.0) -> None:
     """Fill ``class_name`` and ``probability`` from a classifier (``step_mm``: the image's
     grid, mm per pixel)."""
-    probs = clf.logits(pred.image, step_mm).softmax(0)
+    logits = clf.logits(pred.image, step_mm)
+    probs = (logits[0] if clf.task == "both" else logits).softmax(0)
     k = int(probs.argmax())
-    pred.class_name = clf.class_names[k] if k < len(clf.class_names) else str(k)
+    names = HAND_NAMES if clf.task == "both" else clf.class_names
+    pred.class_name = names[k] if k < len(names) else str(k)
     pred.probability = float(probs[k])
 
 
 def segment(image: np.ndarray, seg: Predictor, step_mm: float = 1.0) -> np.ndarray:
     """(H, W) uint8 classes: the network's labels resized back (and off its canvas, if it has
     one), 0 where the image is 0. ``step_mm``: the image's grid, mm per pixel."""
-    labels = seg.logits(image, step_mm).argmax(0).numpy().astype(np.uint8)
+    logits = seg.logits(image, step_mm)
+    labels = (logits[1] if seg.task == "both" else logits).argmax(0).numpy().astype(np.uint8)
     back = labels_on_map(labels, image.shape, seg.canvas(step_mm))
     return np.where(image > 0, back, 0).astype(np.uint8)
 
@@ -146,6 +152,8 @@ def predict_image(
     mm per pixel (the default map's 1 mm; it matters only to a model with a canvas)."""
     if clf is None and seg is None:
         raise DataError("give a classifier, a segmenter or both")
+    if seg is None and clf.task == "both":
+        seg = clf  # a class-and-parts network answers both
     pred = Prediction(np.asarray(image, np.uint8))
     if clf is not None:
         classify(pred, clf, step_mm)

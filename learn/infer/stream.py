@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from learn.data.folder import HAND_NAMES
 from learn.infer.fastpath import FastInference, compile_frozen
 from learn.infer.frame import Box, ImageOps, InputOps, TaxelVotes
 from learn.infer.predict import Predictor
@@ -83,7 +84,8 @@ def bf16_weights(pred: Predictor) -> Predictor:
 class Recognizer:
     """A tactile map with a classifier, a segmenter or both (`learn.infer.predict.Predictor`),
     answering taxel frames (N,) of pressures, Pa, one at a time. ``threshold_pa``: the per-part
-    summary counts the taxels above it, Pa."""
+    summary counts the taxels above it, Pa. A class-and-parts network (task "both", given as
+    either) answers both in one pass."""
 
     def __init__(
         self,
@@ -94,11 +96,16 @@ class Recognizer:
     ) -> None:
         if classifier is None and segmenter is None:
             raise ConfigError("give a classifier, a segmenter or both")
+        one = next((p for p in (classifier, segmenter) if p is not None and p.task == "both"), None)
+        if one is not None:
+            if {id(p) for p in (classifier, segmenter) if p is not None} != {id(one)}:
+                raise ConfigError("a class-and-parts network answers both; give it alone")
+            classifier = segmenter = one
         for pred, task, role in (
             (classifier, "classify", "classifier"),
             (segmenter, "segment", "segmenter"),
         ):
-            if pred is not None and pred.task != task:
+            if pred is not None and pred.task not in (task, "both"):
                 raise ConfigError(f"the {role} is a '{pred.task}' network; give a '{task}' one")
         if not threshold_pa >= 0:
             raise ConfigError(f"threshold {threshold_pa} Pa: give a pressure >= 0")
@@ -110,6 +117,12 @@ class Recognizer:
         self._box: Box | None = None
         ops: dict[tuple, InputOps] = {}
         self._clf = self._seg = self._votes = self._empty = None
+        self._one = one is not None
+        if self._one:
+            self._seg = self._clf = _NetBuffers(one, tmap, ops)
+            self._votes = TaxelVotes.build(tmap, self._seg.ops)
+            self._empty = self._one_pass(None)[:2]
+            return
         if classifier is not None:
             self._clf = _NetBuffers(classifier, tmap, ops)
             self._empty = self._classify(None)  # an empty frame's answer, computed once
@@ -136,6 +149,12 @@ class Recognizer:
         p = self.check(p)
         self._box = self._pix.fill(p, self._image, self._box)
         answer = Answer()
+        if self._one:
+            k, prob, answer.segmentation, answer.taxel_labels = self._one_pass(self._box)
+            answer.class_name, answer.probability = HAND_NAMES[k], prob
+            answer.parts = part_summary(answer.taxel_labels, p, threshold=self.threshold_pa)
+            answer.latency_ms = 1e3 * (time.perf_counter() - start)
+            return answer
         with torch.inference_mode():
             if self._clf is not None:
                 k, prob = self._empty if self._box is None else self._classify(self._box)
@@ -146,6 +165,26 @@ class Recognizer:
                 answer.parts = part_summary(answer.taxel_labels, p, threshold=self.threshold_pa)
         answer.latency_ms = 1e3 * (time.perf_counter() - start)
         return answer
+
+    def _one_pass(self, box: Box | None) -> tuple[int, float, np.ndarray, np.ndarray]:
+        """(class index, its probability, segmentation (h, w), taxel labels (N,)) of a
+        class-and-parts network on the current image (an empty frame: the class only)."""
+        buf = self._seg
+        if box is None and self._empty is not None:
+            blank = np.zeros(buf.resized.shape, np.uint8)
+            return (*self._empty, blank, np.zeros(self.tmap.n_taxels, np.uint8))
+        buf.ops.resize(self._image, box, buf.resized)
+        buf.ops.keep_support(buf.resized, self._image_ext, box, buf.input)
+        with torch.inference_mode(), flushing():
+            logits, parts = self.segmenter.model(buf.x)
+        probs = logits[0].float().softmax(0)
+        k = int(probs.argmax())
+        labels = parts[0].argmax(0).numpy()
+        if box is None:
+            return k, float(probs[k]), labels, np.zeros(self.tmap.n_taxels, np.uint8)
+        buf.labels_ext[1:] = labels.ravel()
+        taxel_labels = self._votes.labels(buf.labels_ext, self._image_ext, box)
+        return k, float(probs[k]), (labels * (buf.input > 0)).astype(np.uint8), taxel_labels
 
     def _classify(self, box: Box | None) -> tuple[int, float]:
         """(class index, its softmax probability) of the classifier on the current image."""

@@ -17,6 +17,7 @@ from torch import nn
 import learn.numerics  # noqa: F401 (torch's worker threads start flushing subnormals)
 from learn.models.action import Action3D
 from learn.models.blocks import fold_batch_norm
+from learn.models.compact import CompactSeg, HandParts
 from learn.models.fcn import FCN16s
 from learn.models.handsnet import HandsNet
 from learn.models.segnet import SegNet
@@ -29,6 +30,8 @@ MODELS: dict[str, Callable[..., nn.Module]] = {
     "segnet": SegNet,
     "fcn16s": FCN16s,
     "action_3d": Action3D,
+    "compactseg": CompactSeg,
+    "handparts": HandParts,
 }
 
 
@@ -62,7 +65,9 @@ def prepare_for_inference(model: nn.Module) -> nn.Module:
 __all__ = [
     "MODELS",
     "Action3D",
+    "CompactSeg",
     "FCN16s",
+    "HandParts",
     "HandsNet",
     "SegNet",
     "VGGClassifier",

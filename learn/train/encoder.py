@@ -26,6 +26,9 @@ from learn.data.load import is_dataset, load_data
 from learn.train.checkpoint import BEST, LAST, load_checkpoint
 from learn.train.runs import train_once
 
+#: the segmenters whose encoder is VGG16's (its ``encoder.*`` names and shapes)
+VGG_SEGMENTERS = ("segnet", "fcn16s")
+
 #: the classifier's schedule (epochs, lr drop period in epochs; docs/findings.md)
 CLASSIFIER_EPOCHS, CLASSIFIER_DROP_EPOCHS = 20, 14
 FOLDER = "vgg16"  # the classifier's run folder inside the segmenter's
@@ -72,7 +75,7 @@ def wanted(
     ``--from-scratch``; otherwise for a segmenter on a handskin dataset without ``--init`` or
     ``--cv-grid`` (the classifier would see every fold's people), and on ``--resume`` as the run
     in ``out`` started."""
-    if from_scratch or run.task != "segment" or init is not None or cv_grid:
+    if from_scratch or run.model.arch not in VGG_SEGMENTERS or init is not None or cv_grid:
         return False
     if not is_dataset(data):  # an image folder has no non-hand images to learn a classifier
         return False

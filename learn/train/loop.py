@@ -30,7 +30,7 @@ from learn.numerics import flushing
 from learn.train.checkpoint import BEST, LAST, load_checkpoint
 from learn.train.curves import plot_history
 from learn.train.device import check_precision
-from learn.train.losses import SegmentationLoss, class_weights
+from learn.train.losses import BothLoss, SegmentationLoss, class_weights
 from learn.train.optim import load_weights, make_optimizer, make_scheduler
 from learn.train.state import check_stop_epoch, improved, patience_out, restore, save, weights_copy
 from learn.train.validation import evaluate_tensors
@@ -76,7 +76,8 @@ def make_loss(run: RunConfig, train: TensorData) -> nn.Module:
     """The configured loss; weighted CE takes median-frequency weights of the training targets."""
     name = run.train.loss
     weights = class_weights(train.y, run.model.num_classes) if name == "weighted_ce" else None
-    return SegmentationLoss(name, weights).to(run.device)
+    loss = BothLoss(name, weights) if run.task == "both" else SegmentationLoss(name, weights)
+    return loss.to(run.device)
 
 
 def build(run: RunConfig, init: dict | None = None):
@@ -101,7 +102,7 @@ def train_step(model, loss_fn, optimizer, x, y, run: RunConfig) -> float:
         x = x.contiguous(memory_format=torch.channels_last)
     with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=run.precision == "bf16"):
         out = model(x)
-    loss = loss_fn(out.float(), y)
+    loss = loss_fn(tuple(o.float() for o in out) if isinstance(out, tuple) else out.float(), y)
     optimizer.zero_grad(set_to_none=True)
     loss.backward()
     optimizer.step()

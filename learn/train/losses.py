@@ -132,6 +132,25 @@ class SegmentationLoss(nn.Module):
         return weighted_cross_entropy(logits, target, self.weights)
 
 
+class BothLoss(nn.Module):
+    """The loss of a class-and-parts network (`learn.models.compact.HandParts`): cross-entropy of
+    its hand / non-hand logits plus its parts' `SegmentationLoss` ``name`` (``weights``: their
+    class weights). ``forward((class (B, 2), parts (B, C, h, w)), target (B, h, w))``: the
+    target is a hand's label image, a non-hand's all `IGNORE` (so the parts learn from hands
+    only, as the paper's segmenters do), and says each image's class."""
+
+    def __init__(self, name: str = "weighted_ce", weights=None) -> None:
+        super().__init__()
+        self.parts = SegmentationLoss(name, weights)
+
+    def forward(self, logits: tuple[torch.Tensor, torch.Tensor], target: torch.Tensor):
+        is_hand = (target != IGNORE).flatten(1).any(1).long()
+        hand_loss = nn.functional.cross_entropy(logits[0], is_hand)
+        if not is_hand.any():
+            return hand_loss + 0.0 * logits[1].sum()
+        return hand_loss + self.parts(logits[1][is_hand == 1], target[is_hand == 1])
+
+
 def class_weights(y: torch.Tensor, num_classes: int) -> np.ndarray:
     """Median-frequency class weights (C,) of targets (S,) or (S, h, w) (Eigen & Fergus)."""
     if y.ndim >= 2:

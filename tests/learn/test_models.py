@@ -27,20 +27,34 @@ from tactile.errors import ConfigError, DataError
 
 ARCHS = sorted(a for a, m in MODELS.items() if m.task != "sequence")  # test_action_models: those
 TINY_WIDTH = 0.125
+COMPACT = ("compactseg", "handparts")
 SIZES = [(37, 53), (68, 100)]
 
 
 def make(arch: str, num_classes: int, in_channels: int = 1, size=(37, 53), **kw) -> nn.Module:
     """A small instance of ``arch`` (tiny width; HandsNet is fixed by the paper)."""
     kw.update({"num_classes": num_classes, "in_channels": in_channels})
-    kw.update({"input_size": size} if arch == "handsnet" else {"width": TINY_WIDTH})
+    if arch == "handsnet":
+        kw["input_size"] = size
+    elif arch not in COMPACT:  # the compact networks are small at their own width 1
+        kw["width"] = TINY_WIDTH
     return create_model(arch, **kw)
 
 
-def expected_shape(model: nn.Module, batch: int, size: tuple[int, int]) -> tuple[int, ...]:
+def expected_shape(model: nn.Module, batch: int, size: tuple[int, int]) -> tuple:
     if model.task == "classification":
         return (batch, model.num_classes)
+    if model.task == "both":  # hand / non-hand, then the parts
+        return ((batch, 2), (batch, model.num_classes, *size))
     return (batch, model.num_classes, *size)
+
+
+def outputs(y) -> tuple[torch.Tensor, ...]:
+    return y if isinstance(y, tuple) else (y,)
+
+
+def shape_of(y) -> tuple:
+    return tuple(tuple(o.shape) for o in y) if isinstance(y, tuple) else tuple(y.shape)
 
 
 @pytest.mark.parametrize("size", SIZES)
@@ -52,15 +66,15 @@ def test_forward_backward(arch, in_channels, num_classes, size):
     model = make(arch, num_classes, in_channels, size)
     x = torch.rand(2, in_channels, *size)
     y = model(x)
-    assert y.shape == expected_shape(model, 2, size)
-    assert torch.isfinite(y).all()
-    y.square().mean().backward()
+    assert shape_of(y) == expected_shape(model, 2, size)
+    assert all(torch.isfinite(o).all() for o in outputs(y))
+    sum(o.square().mean() for o in outputs(y)).backward()
     for name, p in model.named_parameters():
         if p.requires_grad:
             assert p.grad is not None and torch.isfinite(p.grad).all(), name
     model.eval()
     with torch.no_grad():
-        assert model(x).shape == y.shape
+        assert shape_of(model(x)) == shape_of(y)
 
 
 @pytest.mark.parametrize("arch", ARCHS)
@@ -254,7 +268,8 @@ def score(model: nn.Module, x: torch.Tensor, y: torch.Tensor) -> float:
     for m in dropouts:
         m.eval()
     with torch.no_grad():
-        acc = (model(x).argmax(1) == y).float().mean().item()
+        out = model(x)
+        acc = ((out[1] if isinstance(out, tuple) else out).argmax(1) == y).float().mean().item()
     for m in dropouts:
         m.train()
     return acc
@@ -269,8 +284,9 @@ def test_overfits_one_batch(arch):
     x, y = one_batch(model.task, model.num_classes, size)
     opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], lr=3e-3)
     target = 1.0 if model.task == "classification" else 0.95
+    parts = (lambda x: model(x)[1]) if model.task == "both" else model
     for step in range(150):
-        loss = nn.functional.cross_entropy(model(x), y)
+        loss = nn.functional.cross_entropy(parts(x), y)
         opt.zero_grad()
         loss.backward()
         opt.step()

@@ -115,7 +115,7 @@ def test_box_labels_follow_the_smallest_box_rule():
 
 
 def test_print_shape_counted_by_hand():
-    img, lines = drawn_print()
+    img, _ = drawn_print()
     folder_boxes = np.array([[PALM, 18, 36, 8, 32], [THUMB, 4, 10, 38, 52], [INDEX, 0, 10, 8, 22]])
     s = print_shape(img, folder_boxes)
     # blobs of >= 30 px above level 4: palm 300, thumb 50, index 60 (the 6-px blob is a speck)
