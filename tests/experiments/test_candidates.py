@@ -32,7 +32,7 @@ def test_candidate_arguments_in_words(tmp_path):
     net = tmp_path / "n.pt"
     net.write_bytes(b"")
     assert parse_candidate(f"A=  {net}") == Candidate("A", (net,))
-    with pytest.raises(ConfigError, match=r"give NAME=NETWORK\.pt or NAME=CLASSIFIER\.pt,SEGMENTER"):
+    with pytest.raises(ConfigError, match=r"NAME=NETWORK\.pt or NAME=CLASSIFIER\.pt,SEGMENTER"):
         parse_candidate(str(net))
     with pytest.raises(DataError, match="no checkpoint at"):
         parse_candidate(f"A={tmp_path / 'missing.pt'}")
