@@ -271,6 +271,7 @@ CASES = [
     ),
     Case("part-out-ro", ["part", "plate", "--out", R + "/ro/p"], ("--out", "read-only"), read_only),
     Case("probe-n-forces", ["probe", "--part", "plate", "--n-forces", "0"], ("--n-forces 0",)),
+    Case("probe-seed-negative", ["probe", "--part", "plate", "--seed", "-1"], ("--seed -1",)),
     Case(
         "probe-png-ro",
         ["probe", "--part", "plate", "--png", R + "/ro/c.png"],

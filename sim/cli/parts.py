@@ -135,6 +135,8 @@ def probe_command(
         require_positive("--max-force", max_force, "N")
         if n_forces < 2:
             raise ConfigError(f"--n-forces {n_forces} is out of range; allowed >= 2")
+        if seed < 0:
+            raise ConfigError(f"--seed {seed} is out of range; allowed >= 0")
         require_output(png, "--png", suffixes=(".png",))
         p = get_part(part)
     except (HandskinError, KeyError) as err:
