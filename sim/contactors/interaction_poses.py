@@ -89,15 +89,17 @@ def finger_spread(
     The spread is the subject's habit plus N(0, half their pose noise), clipped to
     `FINGER_SPREAD_LIMIT_DEG`; each finger turns `FAN` times it away from the middle finger, times
     cos(its MCP flexion target): the collateral ligaments tighten as the MCP flexes, so a finger
-    bent 90 degrees cannot spread (Kapandji, The Physiology of the Joints, vol. 1).
+    bent 90 degrees cannot spread (Kapandji, The Physiology of the Joints, vol. 1); no finger
+    beyond its MCP's abduction limit (the pinkie, twice the spread, stops at 20 degrees).
     """
     lo, hi = FINGER_SPREAD_LIMIT_DEG
     habit, noise = subject.finger_spread_deg, 0.5 * subject.pose_noise_deg
     spread = float(np.clip(habit + rng.normal(0.0, noise), lo, hi))
+    limit = JOINT_LIMITS_DEG["mcp_abd"][1]
     out = {}
     for f in FINGERS:
         bend = max(float(np.cos(targets_rad.get(f"{f}_mcp_flex", 0.0))), 0.0)
-        out[f"{f}_mcp_abd"] = float(np.deg2rad(FAN[f] * spread * bend))
+        out[f"{f}_mcp_abd"] = float(np.deg2rad(min(FAN[f] * spread * bend, limit)))
     return out
 
 

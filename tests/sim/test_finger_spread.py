@@ -52,6 +52,8 @@ def test_trial_spread_stays_inside_the_joint_limits_and_varies_with_noise():
     ]
     assert max(pinkie) <= 20.0 and min(pinkie) >= 0.0  # the pinkie's abduction limit
     assert np.std(pinkie) > 1.0
+    wide = dataclasses.replace(noisy, finger_spread_deg=16.0)  # twice 16 deg: held at the limit
+    assert np.rad2deg(finger_pose("palm", wide, rng).targets_rad["pinkie_mcp_abd"]) <= 20.0
 
 
 def test_subjects_draw_their_habit_from_the_documented_range():
@@ -60,7 +62,7 @@ def test_subjects_draw_their_habit_from_the_documented_range():
     assert lo <= min(spreads) and max(spreads) <= hi
     assert np.mean(spreads) == pytest.approx((lo + hi) / 2, abs=0.4)  # uniform: se 0.12 deg
     with pytest.raises(ConfigError, match="finger_spread_deg"):
-        dataclasses.replace(SUBJECT, finger_spread_deg=15.0)
+        dataclasses.replace(SUBJECT, finger_spread_deg=25.0)  # beyond the MCP abduction limit
 
 
 def test_plan_refuses_a_preshape_joint_without_a_target():
