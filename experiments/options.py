@@ -13,7 +13,7 @@ import typer
 
 from learn.cli.options import DeviceOpt, ProgressOpt, SeedOpt, opt
 from tactile.errors import ConfigError, DataError, require_folder
-from tactile.files import require_writable
+from tactile.files import require_output
 
 __all__ = ["DeviceOpt", "ProgressOpt", "SeedOpt", "opt"]
 
@@ -46,12 +46,16 @@ def check_at_least(flag: str, value: int | None, least: int = 1) -> None:
         raise ConfigError(f"{flag} {value} is out of range; allowed >= {least}")
 
 
-def check_out(out: Path, *others: tuple[str, Path | None]) -> None:
-    """The report folder and other output folders (flag, path) can be created and written."""
+def check_out(
+    out: Path, *others: tuple[str, Path | None], reads: tuple[Path | None, ...] = ()
+) -> None:
+    """The report folder and other output folders (flag, path) can be created and written, and
+    are neither a folder the experiment ``reads`` nor a dataset or run folder
+    (`tactile.files.require_output`)."""
     for flag, path in (("--out", out), *others):
         if path is not None:
             require_folder(Path(path), flag)
-            require_writable(Path(path), flag, folder=True)
+            require_output(Path(path), flag, reads=reads, folder=True)
 
 
 def parse_list(flag: str, text: str | None, kind: type, skip: tuple[str, ...] = ()) -> tuple | None:

@@ -497,6 +497,17 @@ OUTPUT_CASES = [
     Case("view-panel-suffix", ["view", R + "/ds", "--panel", R + "/v.svgz"], (".png suffix",)),
     Case("view-sequence-suffix", ["view", R + "/ds", "--sequence", R + "/s.mp4"], (".gif or",)),
     Case("evaluate-out-checkpoint", [*EV, R + "/run/best.pt"], READS),
+    Case("evaluate-threads-huge", [*EV, R + "/r.md", "--threads", "10" * 10], ("--threads",)),
+    Case(
+        "evaluate-hand-classes-on-a-dataset",
+        [*EV, R + "/r.md", "--hand-classes", "hand"],
+        ("--hand-classes hand", "handskin dataset", "drop it"),
+    ),
+    Case(
+        "experiment-out-into-the-dataset",
+        ["experiment", "robustness-a", R + "/ds", "--out", R + "/ds", "--quick"],
+        ("--out", "is a dataset folder", "give a new --out folder"),
+    ),
     Case("evaluate-json-beside", [*EV, R + "/ds/info.md"], ("also write", "info.json", *READS)),
     Case("evaluate-json-run-file", [*EV, R + "/run/test_metrics.md"], ("of the run folder",)),
     Case("evaluate-out-suffix", [*EV, R + "/report.txt"], (".md suffix", "report.md")),

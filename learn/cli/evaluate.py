@@ -19,6 +19,7 @@ from learn.cli.options import (
     check_data,
     fail,
     hand_classes,
+    is_dataset_path,
     opt,
 )
 from tactile.dataset.boxes import is_box_folder
@@ -71,6 +72,11 @@ def evaluate_command(
     try:
         check_timing(time_runs, time_rounds, threads)
         check_data(data)
+        if hand and is_dataset_path(data):
+            raise ConfigError(
+                f"--hand-classes {hand_names}: names the hand folders of an image folder, but "
+                f"{data} is a handskin dataset, whose samples say hand or not. Fix: drop it"
+            )
         require_folder(out.parent, "--out", "give a file path in a folder")
         beside = [out.with_suffix(".json"), out.with_name(f"{out.stem}_actions_frames.png")]
         beside += [out.with_name(f"{out.stem}_actions_confusion.png")]

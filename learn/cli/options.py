@@ -11,6 +11,7 @@ from typing import Annotated
 
 import typer
 
+from tactile.dataset.folder import DATASET
 from tactile.errors import DataError
 
 
@@ -85,3 +86,8 @@ def check_data(data: Path) -> None:
             f"no dataset or image folder at {data}. Fix: a dataset folder (holding dataset.h5) "
             "or a folder of class sub-folders of images"
         )
+
+
+def is_dataset_path(data: Path) -> bool:
+    """A handskin dataset folder (or its dataset.h5), not an image folder."""
+    return (data / DATASET).is_file() or (data.is_file() and data.suffix == ".h5")

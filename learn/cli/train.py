@@ -19,10 +19,10 @@ from learn.cli.options import (
     check_data,
     fail,
     hand_classes,
+    is_dataset_path,
     opt,
 )
 from tactile.config import read_toml, to_dict
-from tactile.dataset.folder import DATASET
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, HandskinError, require_folder
 from tactile.files import os_error_text, require_output, write_text_atomic
@@ -82,11 +82,6 @@ def choose_arch(arch: str | None, config: Path | None) -> str:
             f"train? Fix: drop --arch (then {in_toml} trains) or change the TOML's arch"
         )
     return arch or in_toml or "handsnet"
-
-
-def is_dataset_path(data: Path) -> bool:
-    """A handskin dataset folder (or its dataset.h5), not an image folder."""
-    return (data / DATASET).is_file() or (data.is_file() and data.suffix == ".h5")
 
 
 def warn_crop(canvas_mm: tuple[float, float], data: Path) -> None:

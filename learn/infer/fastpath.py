@@ -131,8 +131,12 @@ def cpu_ms_per_image(
         torch.set_num_threads(before)
 
 
+MAX_THREADS = 1024  # torch threads a command may ask for (more overflows torch's own count)
+
+
 def check_timing(time_runs: int, time_rounds: int, threads: int) -> None:
-    """A ``ConfigError`` naming the option unless runs, rounds and threads are each >= 1."""
+    """A ``ConfigError`` naming the option unless runs, rounds and threads are each >= 1 (and
+    threads at most `MAX_THREADS`)."""
     for name, value in (
         ("time runs", time_runs),
         ("time rounds", time_rounds),
@@ -143,6 +147,8 @@ def check_timing(time_runs: int, time_rounds: int, threads: int) -> None:
                 f"{name} must be a whole number >= 1, got {value!r}; fix the "
                 f"timing options: pass --{name.replace(' ', '-')} 1 or more"
             )
+    if threads > MAX_THREADS:
+        raise ConfigError(f"--threads {threads} is out of range; allowed 1..{MAX_THREADS}")
 
 
 def interleaved_cpu_ms(
