@@ -275,7 +275,8 @@ SEGNET_GPU = RunConfig(
 FCN16S = dataclasses.replace(SEGNET, model=ModelConfig("fcn16s", 7, width=0.25))
 
 #: The action network (*ours*): 8 actions, frames at 34 x 50 px (HandsNet's pareto point),
-#: Adam at 1e-3, batch 32 sequences, 30 epochs with x 0.2 after 20 (docs/learning.md, Actions).
+#: Adam at 1e-3, batch 32 sequences, 30 epochs with x 0.2 after 20 (its scores: README, "The
+#: action from its 10 Hz sequence").
 ACTION_3D = RunConfig(
     ModelConfig("action_3d", 8, input_size=(34, 50)),
     TrainConfig(optimizer="adam", lr=0.001, lr_drop_period_epochs=20, batch_size=32, epochs=30),

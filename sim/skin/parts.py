@@ -81,7 +81,7 @@ def finer_forearm_tiling(n_rows: int) -> Tiling:
     count whose pads span the forearm's width most closely, and the slots whose centroid lies in
     the forearm's bare module stay bare. Same box, taxel density (n_rows / 5)² times as high:
     parts `forearm_x2` (7 rows, 7.6 mm) and `forearm_x4` (10 rows, 5.3 mm) ask how much the
-    taxel density limits what a network can read from a print (docs/learning.md, "A denser
+    taxel density limits what a network can read from a print (docs/findings.md, "A denser
     skin": at x2 SegNet's mIoU rises by 17 points, HandsNet's accuracy by nothing measurable).
     """
     big = FOREARM_TILING

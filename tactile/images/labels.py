@@ -180,7 +180,7 @@ def backproject(tmap, seg: np.ndarray, *, radius_mm: float | None = None) -> np.
 
 
 # m: pressed taxels closer than this belong to one contact: a hand's fingers and palm stay one
-# (on two-contact forearm samples 50 mm separated the contacts best; docs/learning.md)
+# (on two-contact forearm samples, 50 mm separated the contacts best)
 CONTACT_GAP_M = 0.05
 MIN_CONTACT_TAXELS = 3  # taxels: a smaller group of pressed taxels is read noise
 
