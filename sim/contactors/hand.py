@@ -17,7 +17,8 @@ Joints (degrees; positive = flexion, palmar abduction, spreading, cupping), acti
 the AAOS averages (Greene & Heckman, The Clinical Measurement of Joint Motion, 1994) and
 Cobos et al., IROS 2008 (MCP abduction +-15-20): finger MCP flexion -30..90 (hyperextension
 limited to 30), MCP abduction -20..20 (middle -15..15), PIP 0..100, DIP -10..80; thumb CMC
-flexion across the palm -15..50, CMC palmar abduction -10..70, MCP -10..55, IP -15..80. Palm
+flexion across the palm -35..50 (radial abduction to the published maximal thumb-index angle,
+`sim.contactors.hand_kinematics`), CMC palmar abduction -10..70, MCP -10..55, IP -15..80. Palm
 arch (ring + little metacarpals about an axis between middle and ring metacarpals) 0..25: the
 4th and 5th CMC joints flex about 10-15 and 20-30 degrees (Kapandji, The Physiology of the
 Joints, vol. 1; El-Shennawy et al., J Hand Surg 2001).

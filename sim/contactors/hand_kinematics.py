@@ -170,7 +170,11 @@ JOINT_LIMITS_DEG: dict[str, tuple[float, float]] = {
     "mcp_flex": (-30.0, 90.0),
     "pip": (0.0, 100.0),
     "dip": (-10.0, 80.0),
-    "thumb_cmc_flex": (-15.0, 50.0),
+    # radial abduction (negative) to 35 deg beyond the home 35 deg: the thumb's axis up to 70 deg
+    # from the middle finger's, the published maximal thumb-index angle (53.4 +- 6.5 deg) plus the
+    # index's own abduction (17.2 +- 2.6 deg) (Chatzioglou et al., Anat Cell Biol 57(2), 2024);
+    # was -15 (assumed), a thumb that could open only 38 deg from the index
+    "thumb_cmc_flex": (-35.0, 50.0),
     "thumb_cmc_abd": (-10.0, 70.0),
     "thumb_mcp": (-10.0, 55.0),
     "thumb_ip": (-15.0, 80.0),

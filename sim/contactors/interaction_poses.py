@@ -15,7 +15,7 @@ Modes (Albini & Cannata 2020, Fig. 6: whole hands, fingertips only, different pr
 
 Every mode fans the fingers by the subject's habitual spread (`finger_spread`; held from before
 the hand lands, `sim.contactors.spec.PressPlan.preshape`), so that fingers do not press parallel and
-touching.
+touching; the whole-hand modes also open the thumb (`thumb_spread`, held likewise).
 """
 
 from __future__ import annotations
@@ -50,6 +50,17 @@ FREE_PROBS = (0.3, 0.35, 0.05, 0.1, 0.2)  # fingertip touches are common in Fig.
 GRASP_ARCH_DEG = 20.0
 # Finger fan: MCP abduction of each finger away from the middle one, in units of the spread.
 FAN = {"index": 1.0, "middle": 0.0, "ring": 1.0, "pinkie": 2.0}
+# Thumb spread: in a whole-hand touch the thumb opens radially (CMC radial abduction, negative
+# `thumb_cmc_flex`) this far beyond its home, uniform per trial, up to the joint's published
+# maximum, held from the air. In the real prints the thumb's pad lies 111 deg (median) from the
+# finger pads about the palm centre and 156 mm from them (430 prints with palm, thumb and a finger
+# boxed, ../shared/data/real_hands; 11 below 60 deg), at or beyond what a flat hand reaches with
+# the thumb fully open (about 96 deg): people open the hand, thumb included, to the size of what
+# they hold (Santello et al., J Neurosci 18(23), 1998). With the thumb at its home (and flexed
+# across the palm in grasps) the default forearm's prints read 69 deg and 70 mm; the thumb's share
+# of a grasp's digit force rose from 13.2 to 16.5 % (published estimate 17 %).
+THUMB_SPREAD_DEG = (20.0, 35.0)
+THUMB_SPREAD_MODES = ("grasp", "hook", "flat", "palm")  # not a loose fist nor fingertip touches
 
 
 @dataclass(frozen=True)
@@ -101,6 +112,16 @@ def finger_spread(
         bend = max(float(np.cos(targets_rad.get(f"{f}_mcp_flex", 0.0))), 0.0)
         out[f"{f}_mcp_abd"] = float(np.deg2rad(min(FAN[f] * spread * bend, limit)))
     return out
+
+
+def thumb_spread(mode: str, rng: np.random.Generator) -> dict[str, float]:
+    """Radial abduction target (suffix -> rad) opening the thumb `THUMB_SPREAD_DEG` beyond its
+    home in the modes of `THUMB_SPREAD_MODES` (none in the others), within the joint's limit."""
+    if mode not in THUMB_SPREAD_MODES:
+        return {}
+    lo, hi = THUMB_SPREAD_DEG
+    limit = JOINT_LIMITS_DEG["thumb_cmc_flex"][0]
+    return {"thumb_cmc_flex": float(np.deg2rad(max(-rng.uniform(lo, hi), limit)))}
 
 
 def mcp_offset_m(subject: Subject) -> float:
@@ -164,7 +185,7 @@ def finger_pose(
     else:
         pose, shift = _mode_pose(mode, wrap_shift_m)
     targets = _noisy(pose, subject.pose_noise_deg, rng)
-    spread = finger_spread(subject, targets, rng)
+    spread = finger_spread(subject, targets, rng) | thumb_spread(mode, rng)
     return HandPose(targets | spread, shift, pitch, mode, tuple(spread))
 
 

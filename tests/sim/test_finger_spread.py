@@ -1,4 +1,5 @@
-"""Finger spread: each subject's habitual MCP abduction, fanned, held from before the hand lands."""
+"""Finger spread: each subject's habitual MCP abduction, fanned, held from before the hand lands;
+the thumb opened likewise in whole-hand touches."""
 
 from __future__ import annotations
 
@@ -8,8 +9,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from sim.contactors.hand_kinematics import FINGERS
-from sim.contactors.interaction_poses import finger_pose, finger_spread
+from sim.contactors.hand_kinematics import FINGERS, JOINT_LIMITS_DEG
+from sim.contactors.interaction_poses import (
+    THUMB_SPREAD_DEG,
+    finger_pose,
+    finger_spread,
+    thumb_spread,
+)
 from sim.contactors.interactions import hand_contactor, joint_name, plan_hand_interaction
 from sim.contactors.spec import PressPlan
 from sim.contactors.subjects import FINGER_SPREAD_RANGE_DEG, Subject, sample_subjects
@@ -40,7 +46,19 @@ def test_flat_pose_fans_the_pinkie_twice_as_far_as_the_index_and_holds_the_sprea
     index, pinkie = pose.targets_rad["index_mcp_abd"], pose.targets_rad["pinkie_mcp_abd"]
     assert np.rad2deg(index) == pytest.approx(8.0 * np.cos(np.deg2rad(5.0)))  # flat: MCP 5 deg
     assert pinkie == pytest.approx(2 * index) and pose.targets_rad["middle_mcp_abd"] == 0.0
-    assert set(pose.preshape) == {f"{f}_mcp_abd" for f in ("index", "middle", "ring", "pinkie")}
+    fingers = {f"{f}_mcp_abd" for f in ("index", "middle", "ring", "pinkie")}
+    assert set(pose.preshape) == fingers | {"thumb_cmc_flex"}  # the thumb's spread is held too
+
+
+def test_whole_hand_modes_open_the_thumb_within_its_range_and_the_joint_limit():
+    rng, (lo, hi) = np.random.default_rng(3), THUMB_SPREAD_DEG
+    limit = JOINT_LIMITS_DEG["thumb_cmc_flex"][0]
+    for mode in ("grasp", "hook", "flat", "palm"):
+        radial = [-np.rad2deg(thumb_spread(mode, rng)["thumb_cmc_flex"]) for _ in range(200)]
+        assert lo <= min(radial) and max(radial) <= min(hi, -limit)
+    assert thumb_spread("curled", rng) == {} and thumb_spread("fingertips", rng) == {}
+    pose = finger_pose("fingertips", still(SUBJECT, 8.0), rng)
+    assert "thumb_cmc_flex" not in pose.preshape
 
 
 def test_trial_spread_stays_inside_the_joint_limits_and_varies_with_noise():
