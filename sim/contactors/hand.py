@@ -47,8 +47,16 @@ of a print's pressure follows its allowance more than its force (docs/stats.md).
 Strength. Each digit's torque limits are scaled by `DIGIT_STRENGTH` so that the fingers and thumb
 share a grasp's contact force as people's do (`sim.contactors.hand_kinematics`).
 
+Thenar. The thenar eminence (the thenar muscles' bellies over the first metacarpal, soft) is a
+capsule of the palm along the first metacarpal's home axis; the metacarpal itself, with its skin,
+is a thinner capsule (the proximal phalanx's radius) on the thumb's chain over its distal
+`THUMB_METACARPAL_FREE` remainder. The eminence flattens on a surface while the thumb moves: as a
+capsule rotating with the metacarpal it drove into the face under palmar abduction, so a palm
+on the link held the thumb flat (abduction 4-20 deg of a 40-55 deg target, the thenar carrying
+7-14 N, the thumb's tip 30-60 mm off a rounded edge; measured).
+
 Labels. Collision geoms are named ``<prefix><part>_<segment>`` with part in `HAND_PARTS`
-(the thenar eminence on the first metacarpal is "palm"); `geom_parts` / `geom_part_ids` recover
+(the thenar eminence and the first metacarpal are "palm"); `geom_parts` / `geom_part_ids` recover
 the tags from a spec or a compiled model, also after attaching under another prefix. Hand geoms
 do not collide with each other (contype 2, conaffinity 1) but with any default geom.
 """
@@ -104,6 +112,9 @@ PART_RGBA = {  # after the palette of Albini & Cannata 2020, Fig. 10
 # `HandConfig.tissue_depth_m` (3.5 mm mean): palm 9.6 mm, phalanx pads 17.5 mm, fingertip pulp
 # 4.4 mm at the mean (module docstring, "Soft tissue").
 TISSUE_RATIO = {"palm": 2.75, "proximal": 5.0, "middle": 5.0, "distal": 1.25}
+# The first metacarpal's own capsule starts this far along it (fraction of its length): its base
+# lies inside the thenar eminence, by the carpus.
+THUMB_METACARPAL_FREE = 0.35
 _PART_RE = re.compile(r"(?:^|_)[rl]h_(thumb|index|middle|ring|pinkie|palm)_")
 
 
@@ -357,13 +368,16 @@ class _Builder:
         body.add_site(name=f"{self.p}{digit}_tip", pos=tip, group=SITE_GROUP)
 
     def _thumb(self, palm) -> None:
+        """Thenar eminence on the palm, then the thumb's chain from the CMC (module docstring)."""
         geo = self.geo
-        meta = self._body(palm, "thumb_metacarpal", geo.cmc_m["thumb"])
-        a = geo.thumb_axis
+        a, cmc = geo.thumb_axis, geo.cmc_m["thumb"]
+        lengths, radii = geo.lengths_m["thumb"], geo.radii_m["thumb"]
+        self._capsule(palm, "palm", "thenar", cmc, cmc + lengths[0] * a, radii[0])
+        meta = self._body(palm, "thumb_metacarpal", cmc)
         self._hinge(meta, "thumb_cmc_flex", (0, 0, -1), JOINT_LIMITS_DEG["thumb_cmc_flex"])
         self._hinge(meta, "thumb_cmc_abd", (-a[1], a[0], 0), JOINT_LIMITS_DEG["thumb_cmc_abd"])
-        lengths, radii = geo.lengths_m["thumb"], geo.radii_m["thumb"]
-        self._capsule(meta, "palm", "thenar", (0, 0, 0), lengths[0] * a, radii[0])
+        start = THUMB_METACARPAL_FREE * lengths[0] * a
+        self._capsule(meta, "palm", "thumb_metacarpal", start, lengths[0] * a, radii[1])
         quat = np.zeros(4)
         mujoco.mju_mat2Quat(quat, geo.thumb_frame.flatten())
         body = self._body(meta, "thumb_proximal", lengths[0] * a, quat)

@@ -37,7 +37,10 @@ _GRASP = {"mcp_flex": 70.0, "pip": 45.0, "dip": 20.0}  # beyond the edge: stop o
 _GRASP_THUMB = {"thumb_cmc_abd": 55.0, "thumb_cmc_flex": 25.0, "thumb_mcp": 20.0, "thumb_ip": 20.0}
 _DRAPE = {"mcp_flex": 65.0, "pip": 40.0, "dip": 15.0}  # relaxed fingers round an edge
 _FLAT = {"mcp_flex": 5.0, "pip": 5.0, "dip": 0.0}  # on a flat face: pads slightly pressed
-_FLAT_THUMB = {"thumb_cmc_abd": 10.0, "thumb_cmc_flex": -15.0, "thumb_mcp": 5.0, "thumb_ip": 5.0}
+# The thumb of a hand pressed on the link closes palmarly until its pad meets the surface (40 deg
+# is beyond a face or a rounded edge); in fingertip touches it stays clear (10 deg).
+_FLAT_THUMB = {"thumb_cmc_abd": 40.0, "thumb_cmc_flex": -15.0, "thumb_mcp": 10.0, "thumb_ip": 10.0}
+_TIPS_THUMB = {"thumb_cmc_abd": 10.0, "thumb_cmc_flex": -15.0, "thumb_mcp": 5.0, "thumb_ip": 5.0}
 _HOOK = {"mcp_flex": 50.0, "pip": 50.0, "dip": 20.0}
 _TIPS = {"mcp_flex": 20.0, "pip": 35.0, "dip": 10.0}  # with the wrist pitched: pads down
 _LIFTED = {"mcp_flex": -25.0, "pip": 0.0, "dip": 0.0}
@@ -141,7 +144,7 @@ def _fingertips(subject: Subject, rng: np.random.Generator) -> tuple[dict, float
     """Pose (deg), shift (m) and pitch (rad) of a touch with 1-4 fingertips."""
     down = [str(f) for f in rng.choice(FINGERS, size=int(rng.integers(1, 5)), replace=False)]
     up = [f for f in FINGERS if f not in down]
-    pose = {**_fingers(_TIPS, down), **_fingers(_LIFTED, up), **_FLAT_THUMB}
+    pose = {**_fingers(_TIPS, down), **_fingers(_LIFTED, up), **_TIPS_THUMB}
     pitch = np.deg2rad(rng.uniform(*TIPS_PITCH_DEG))
     return pose, -0.8 * fingertip_reach_m(subject, down), float(pitch)
 
