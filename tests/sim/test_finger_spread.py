@@ -11,6 +11,7 @@ import pytest
 
 from sim.contactors.hand_kinematics import FINGERS, JOINT_LIMITS_DEG
 from sim.contactors.interaction_poses import (
+    MCP_REACHED,
     THUMB_SPREAD_DEG,
     finger_pose,
     finger_spread,
@@ -31,12 +32,15 @@ def still(subject: Subject, spread_deg: float) -> Subject:
     return dataclasses.replace(subject, pose_noise_deg=0.0, finger_spread_deg=spread_deg)
 
 
-def test_spread_fans_the_fingers_by_the_habit_times_the_cosine_of_mcp_flexion():
+def test_spread_fans_the_fingers_by_the_habit_times_the_cosine_of_mcp_flexion_reached():
     flex_deg = {"index": 0.0, "middle": 30.0, "ring": 70.0, "pinkie": 95.0}
     targets = {f"{f}_mcp_flex": np.deg2rad(v) for f, v in flex_deg.items()}
     got = finger_spread(still(SUBJECT, 6.0), targets, np.random.default_rng(0))
-    # index 1 x, middle 0 x, ring 1 x, pinkie 2 x the spread; cos(95 deg) < 0 -> no spread
-    want_deg = {"index": 6.0, "middle": 0.0, "ring": 6.0 * np.cos(np.deg2rad(70.0)), "pinkie": 0.0}
+    # index 1 x, middle 0 x, ring 1 x, pinkie 2 x the spread, by the cosine of the flexion reached
+    # (MCP_REACHED of the target; it used to be the target's)
+    reached = {f: np.cos(np.deg2rad(MCP_REACHED * v)) for f, v in flex_deg.items()}
+    want_deg = {"index": 6.0, "middle": 0.0, "ring": 6.0 * reached["ring"]}
+    want_deg["pinkie"] = 12.0 * reached["pinkie"]
     for f, v in want_deg.items():
         assert np.rad2deg(got[f"{f}_mcp_abd"]) == pytest.approx(v, abs=1e-9)
 
@@ -44,7 +48,8 @@ def test_spread_fans_the_fingers_by_the_habit_times_the_cosine_of_mcp_flexion():
 def test_flat_pose_fans_the_pinkie_twice_as_far_as_the_index_and_holds_the_spread():
     pose = finger_pose("flat", still(SUBJECT, 8.0), np.random.default_rng(1))
     index, pinkie = pose.targets_rad["index_mcp_abd"], pose.targets_rad["pinkie_mcp_abd"]
-    assert np.rad2deg(index) == pytest.approx(8.0 * np.cos(np.deg2rad(5.0)))  # flat: MCP 5 deg
+    flat = np.deg2rad(5.0 * MCP_REACHED)  # flat: MCP target 5 deg
+    assert np.rad2deg(index) == pytest.approx(8.0 * np.cos(flat))
     assert pinkie == pytest.approx(2 * index) and pose.targets_rad["middle_mcp_abd"] == 0.0
     fingers = {f"{f}_mcp_abd" for f in ("index", "middle", "ring", "pinkie")}
     assert set(pose.preshape) == fingers | {"thumb_cmc_flex"}  # the thumb's spread is held too
