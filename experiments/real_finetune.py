@@ -48,8 +48,8 @@ class FinetunePlan:
     one per k), optimisation ``steps`` per run, the ``seed`` of the draws and of training."""
 
     ks: tuple[int, ...] = (10, 30, 100, 342)
-    draws: tuple[int, ...] = (5, 3, 2, 1)
-    steps: int = 400
+    draws: tuple[int, ...] = (3, 2, 1, 1)
+    steps: int = 300
     seed: int = 0
     threads: int = 2
 
@@ -245,8 +245,8 @@ def real_finetune(
     test: O.opt(Path, "Box folder of real prints to score on (another fold).", "--test"),
     out: O.OutOpt,
     ks: O.opt(str | None, "Real prints per run, comma-separated (default 10,30,100,342).") = None,
-    draws: O.opt(str | None, "Draws per k, comma-separated (default 5,3,2,1).") = None,
-    steps: O.opt(int | None, "Optimisation steps per run (count; default 400).") = None,
+    draws: O.opt(str | None, "Draws per k, comma-separated (default 3,2,1,1).") = None,
+    steps: O.opt(int | None, "Optimisation steps per run (count; default 300).") = None,
     quick: O.QuickOpt = False,
     seed: O.SeedOpt = 0,
     threads: O.ThreadsOpt = 2,
