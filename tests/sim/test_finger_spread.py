@@ -48,7 +48,7 @@ def test_spread_fans_the_fingers_by_the_habit_times_the_cosine_of_mcp_flexion_re
 def test_flat_pose_fans_the_pinkie_twice_as_far_as_the_index_and_holds_the_spread():
     pose = finger_pose("flat", still(SUBJECT, 8.0), np.random.default_rng(1))
     index, pinkie = pose.targets_rad["index_mcp_abd"], pose.targets_rad["pinkie_mcp_abd"]
-    flat = np.deg2rad(5.0 * MCP_REACHED)  # flat: MCP target 5 deg
+    flat = np.deg2rad(20.0 * MCP_REACHED)  # flat: MCP target 20 deg
     assert np.rad2deg(index) == pytest.approx(8.0 * np.cos(flat))
     assert pinkie == pytest.approx(2 * index) and pose.targets_rad["middle_mcp_abd"] == 0.0
     fingers = {f"{f}_mcp_abd" for f in ("index", "middle", "ring", "pinkie")}
