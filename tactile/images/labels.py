@@ -74,7 +74,8 @@ def label_image(
     Each class c gets its own pressure field ``p * (labels == c)``, interpolated on the map and
     grey-dilated by ``disk(dilate_px)`` like the image (so every foreground pixel of the image
     sees a positive field); a pixel takes the class of the largest field where the tactile image
-    is non-zero, background (0) elsewhere. Pressure on class-0 taxels labels its pixels 0.
+    is non-zero (the lowest class of fields within 8 ulps of each other), background (0)
+    elsewhere. Pressure on class-0 taxels labels its pixels 0.
 
     Parameters
     ----------
@@ -108,9 +109,23 @@ def label_image(
     fields = np.where(lab[None, :] == classes[:, None], p[None, :], 0.0)
     rows, cols = _grown_box(foreground, dilate_px)
     interpolated = tmap.interpolate_box(fields, rows, cols)
-    spread = dilate(np.ascontiguousarray(interpolated), dilate_px)
-    out[rows, cols] = np.where(foreground[rows, cols], classes[spread.argmax(axis=0)], 0)
+    spread = dilate(_class_keys(interpolated), dilate_px)
+    winner = classes[_KEY_CLASSES - (spread & _KEY_CLASSES)]
+    out[rows, cols] = np.where(foreground[rows, cols], winner, 0)
     return out
+
+
+_KEY_CLASSES = 7  # the low three bits of a key: 7 - the class's index among those present
+
+
+def _class_keys(fields: np.ndarray) -> np.ndarray:
+    """(C, h, w) non-negative fields -> (h, w) int64 keys whose order is (largest field, then the
+    first class): the field's float64 bits (ordered as the value for values >= 0) with the low
+    three bits replaced by 7 - the class's index. The largest key over a disk is therefore the
+    class of the largest dilated field, lowest class on ties, as argmax over the dilated fields
+    (C dilations) gives it, in one dilation; fields within 8 ulps count as tied."""
+    best = np.ascontiguousarray(fields.max(axis=0)).view(np.int64)
+    return (best & ~_KEY_CLASSES) | (_KEY_CLASSES - fields.argmax(axis=0))
 
 
 def _grown_box(mask: np.ndarray, margin_px: int) -> tuple[slice, slice]:

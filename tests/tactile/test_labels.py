@@ -17,6 +17,7 @@ from tactile.images.labels import (
     label_image,
     part_summary,
 )
+from tactile.images.morphology import dilate
 from tactile.images.resize import resize_labels
 from tactile.images.tactile_map import TactileMap
 
@@ -60,6 +61,33 @@ def test_precomputed_image_gives_the_same_labels_and_unlabelled_skips_it(
     assert not calls and blank.shape == forearm.shape and not blank.any()
     with pytest.raises(MapError, match="shape"):
         label_image(forearm, p, labels, image=image[:-1])
+
+
+def reference_label_image(
+    tmap: TactileMap, p: np.ndarray, labels: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The documented rule written out slowly: every class's field dilated on the whole map, the
+    class of the largest (lowest class on exact ties) where the image is lit; and where the two
+    largest differ, by at most 8 ulps (a near tie: either class)."""
+    fields = np.stack([np.where(labels == c, p, 0.0) for c in range(7)])
+    spread = np.stack([dilate(f, 4) for f in tmap.interpolate(fields)])
+    top = np.sort(spread, axis=0)[-2:]
+    gap = top[1] - top[0]
+    near = (gap > 0) & (gap <= 8 * np.spacing(top[1]))
+    lit = tmap.image(p) > 0
+    return np.where(lit, spread.argmax(axis=0), 0).astype(np.uint8), near & lit
+
+
+def test_label_image_is_the_slow_rule_but_at_near_ties(forearm: TactileMap) -> None:
+    rng = np.random.default_rng(0)
+    for trial in range(30):
+        p, labels = np.zeros(forearm.n_taxels), np.zeros(forearm.n_taxels, dtype=np.int64)
+        idx = rng.choice(forearm.n_taxels, int(rng.integers(1, 40)), replace=False)
+        levels = [1.0, 2.0] if trial % 2 else list(rng.uniform(1e2, 5e4, 4))  # ties, then not
+        p[idx], labels[idx] = rng.choice(levels, idx.size), rng.integers(0, 7, idx.size)
+        want, near = reference_label_image(forearm, p, labels)
+        got = label_image(forearm, p, labels)
+        np.testing.assert_array_equal(got[~near], want[~near])
 
 
 def test_separated_regions_get_their_class(forearm: TactileMap) -> None:
