@@ -119,3 +119,27 @@ class Counted(nn.Module):
     def forward(self, x):
         self.calls.append(1)
         return self.net(x)
+
+
+def test_stream_command_answers_as_predict_frame(both_run, tiny_dataset):
+    """`handskin stream --classifier HANDPARTS.pt` over standard input: one JSON line a frame,
+    each `predict_frame`'s class, probability and taxel labels."""
+    import json
+    import subprocess
+    import sys
+
+    path, _, _ = both_run
+    tmap, _, to_pa = load_map(tiny_dataset)
+    raw = open_dataset(tiny_dataset).raw[:12].astype(np.int64)
+    lines = b"".join(",".join(map(str, r)).encode() + b"\n" for r in raw)
+    cmd = [sys.executable, "-c", "from handskin.cli import main; main()", "stream"]
+    cmd += ["--map", str(tiny_dataset), "--classifier", str(path), "--threads", "1"]
+    res = subprocess.run(cmd, input=lines, capture_output=True, check=True)
+    answers = [json.loads(line) for line in res.stdout.splitlines()]
+    pred = load_predictor(path)
+    assert len(answers) == len(raw)
+    for a, r in zip(answers, raw, strict=True):
+        ref = predict_frame(to_pa(r), tmap, pred)
+        assert a["class"] == ref.class_name
+        assert a["probability"] == pytest.approx(ref.probability, abs=2e-6)
+        assert a["taxel_labels"] == ref.taxel_labels.tolist()
