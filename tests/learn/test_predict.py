@@ -139,14 +139,24 @@ def test_ground_truth_segmentation_backprojects_to_the_dataset_labels(tiny_datas
         active = sample.pressure > 0
         assert np.array_equal(active, sample.true_labels > 0)  # hand samples: pressed = labelled
         assert (pred.taxel_labels[active] > 0).all()  # every pressed taxel lies under the image
-        # the label image gives a pixel the part with the largest pressure there, so a finger
-        # taxel beside the (harder pressed) palm may be read as palm, and one beside the next
-        # finger (pressed equally hard; ties go to the smaller id) as that finger; none else
+        # the label image gives a pixel the part with the largest pressure there; the tiny set
+        # presses every taxel of a sample equally hard, so where two parts' dilated fields meet
+        # the lower id takes the pixel (ties go to the smaller id, the palm counting as a
+        # neighbour of every finger). A misread taxel is therefore read as the palm or the
+        # finger before its own, and lies within reach of a pressed taxel of that part: the
+        # dilation radius plus the back-projection radius, plus a pixel's diagonal.
         agree = pred.taxel_labels[active] == sample.true_labels[active]
-        assert agree.mean() >= 0.95
+        assert agree.mean() >= 0.9  # only taxels at a border between parts
         read, true = pred.taxel_labels[active][~agree], sample.true_labels[active][~agree]
-        neighbour = (np.abs(read.astype(int) - true) == 1) & (read < 6) & (true < 6)
-        assert ((read == 6) | neighbour).all()
+        assert ((read == 6) | ((read == true - 1) & (true < 6))).all()
+        step = sample.tmap.step_mm
+        reach = (4 + 2) * step + np.sqrt(2) * step
+        centre = np.array([sample.tmap.vertex_uv_mm[sample.tmap.vertex_taxel == t].mean(axis=0)
+                           for t in range(sample.tmap.n_taxels)])
+        pressed = np.flatnonzero(active)
+        for t, part in zip(pressed[~agree], read):
+            others = pressed[sample.true_labels[pressed] == part]
+            assert np.hypot(*(centre[others] - centre[t]).T).min() <= reach
 
 
 def test_read_sample_errors(tiny_dataset, tmp_path):
