@@ -151,10 +151,14 @@ def test_ground_truth_segmentation_backprojects_to_the_dataset_labels(tiny_datas
         assert ((read == 6) | ((read == true - 1) & (true < 6))).all()
         step = sample.tmap.step_mm
         reach = (4 + 2) * step + np.sqrt(2) * step
-        centre = np.array([sample.tmap.vertex_uv_mm[sample.tmap.vertex_taxel == t].mean(axis=0)
-                           for t in range(sample.tmap.n_taxels)])
+        centre = np.array(
+            [
+                sample.tmap.vertex_uv_mm[sample.tmap.vertex_taxel == t].mean(axis=0)
+                for t in range(sample.tmap.n_taxels)
+            ]
+        )
         pressed = np.flatnonzero(active)
-        for t, part in zip(pressed[~agree], read):
+        for t, part in zip(pressed[~agree], read, strict=True):
             others = pressed[sample.true_labels[pressed] == part]
             assert np.hypot(*(centre[others] - centre[t]).T).min() <= reach
 
