@@ -15,9 +15,11 @@ weights in bfloat16 (compiled), and the compiled networks alone (where the time 
 with the machine's load average (other processes slow a shared core): median, p99 and max ms
 per frame against the targets (full answer 5 ms median and 8 ms p99, the classifier's answer
 1.5 ms median); then, on the test split, how many classes and taxel labels of each path differ
-from `predict_frame`'s; then `handskin stream --compile` fed ``--stream-frames`` frames as fast
-as they go through a pipe on standard input and through ZeroMQ on 127.0.0.1, in answered frames
-per second.
+from `predict_frame`'s; then `handskin stream --compile` (per-taxel labels included; the networks
+of ``--stream``, by default the classifier and the segmenter) fed ``--stream-frames`` frames as
+fast as they go through a pipe on standard input and through ZeroMQ on 127.0.0.1, in answered
+frames per second, and its marginal wall time per frame over standard input: the whole command
+run on N and on 2N frames from a file, (t(2N) - t(N)) / N, so that start-up cancels.
 Each ``--network`` is a candidate for the full answer, timed beside them: a class-and-parts
 network (``handparts``) alone, or a segmenter paired with the compiled classifier, each on the
 frame path and compiled, with its differences from its own `predict_frame`.
@@ -36,6 +38,7 @@ import json
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -192,9 +195,7 @@ def free_address() -> str:
 def stream_fps(args, lines: list[bytes], zmq: bool) -> str:
     """Answered frames per second of `handskin stream --compile` fed ``lines`` as fast as they
     go, after one frame answered (the command then ready), and its own summary line."""
-    cmd = [sys.executable, "-c", "from handskin.cli import main; main()", "stream", "--compile"]
-    cmd += ["--map", str(args.data), "--classifier", str(args.classifier)]
-    cmd += ["--segmenter", str(args.segmenter), "--threads", "1", "--no-labels"]
+    cmd = stream_command(args)
     if not zmq:
         return _fps_stdin(cmd, lines)
     import zmq as z  # optional: pyzmq
@@ -217,6 +218,36 @@ def stream_fps(args, lines: list[bytes], zmq: bool) -> str:
     summary = proc.communicate(timeout=120)[1].decode().strip().splitlines()[-1]
     ctx.destroy(linger=0)
     return f"{fps:7.0f} frames/s  ({summary})"
+
+
+def stream_command(args) -> list[str]:
+    """`handskin stream --compile` on one thread with the networks of ``--stream``."""
+    networks = args.stream or [args.classifier, args.segmenter]
+    cmd = [sys.executable, "-c", "from handskin.cli import main; main()", "stream", "--compile"]
+    cmd += ["--map", str(args.data), "--threads", "1", "--classifier", str(networks[0])]
+    return cmd + (["--segmenter", str(networks[1])] if len(networks) > 1 else [])
+
+
+def marginal_ms(args, lines: list[bytes]) -> str:
+    """Marginal wall time per frame of the whole command over standard input: run on N and on
+    2N frames from a file (answers read to the end), (t(2N) - t(N)) / N ms."""
+    cmd, walls = stream_command(args), {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in (len(lines), 2 * len(lines)):
+            frames = Path(tmp) / f"{n}.csv"
+            frames.write_bytes(b"\n".join(itertools.islice(itertools.cycle(lines), n)) + b"\n")
+            with frames.open("rb") as inp:
+                start = time.perf_counter()
+                done = subprocess.run(cmd, stdin=inp, capture_output=True, check=True)
+                walls[n] = time.perf_counter() - start
+            answered = done.stdout.count(b"\n")
+            if answered != n:
+                raise SystemExit(f"stream answered {answered} of {n} frames")
+    ms = 1000 * (walls[2 * len(lines)] - walls[len(lines)]) / len(lines)
+    return (
+        f"{ms:6.2f} ms a frame  (whole command: {walls[len(lines)]:.1f} s for {len(lines)}, "
+        f"{walls[2 * len(lines)]:.1f} s for {2 * len(lines)})"
+    )
 
 
 def _fps_stdin(cmd: list[str], lines: list[bytes]) -> str:
@@ -252,6 +283,12 @@ def main() -> None:
         "--network", type=Path, action="append", default=[], help="a candidate .pt (repeatable)"
     )
     parser.add_argument("--json", type=Path, help="write the latencies (ms) here")
+    parser.add_argument(
+        "--stream",
+        type=lambda text: [Path(p) for p in text.split(",")],
+        help="the networks `handskin stream` runs: CLASSIFIER[,SEGMENTER] or a class-and-parts "
+        ".pt (default: --classifier,--segmenter)",
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     tmap, _, to_pa = load_map(args.data)
@@ -282,9 +319,13 @@ def main() -> None:
     differences(steps, frames, tmap)
     lines = [",".join(map(str, r)).encode() for r in raw.astype(np.int64)]
     lines = list(itertools.islice(itertools.cycle(lines), args.stream_frames))
-    print(f"\nhandskin stream --compile, {len(lines)} frames (CSV lines of raw counts):")
+    networks = " + ".join(str(p) for p in args.stream or [args.classifier, args.segmenter])
+    print(
+        f"\nhandskin stream --compile ({networks}), {len(lines)} frames (CSV lines of raw counts):"
+    )
     print(f"  stdin pipe  {stream_fps(args, lines, zmq=False)}")
     print(f"  zmq tcp     {stream_fps(args, lines, zmq=True)}")
+    print(f"  marginal    {marginal_ms(args, lines)}")
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ suggested default is the fastest candidate whose mean real localisation lies wit
 from __future__ import annotations
 
 import json
+import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -141,14 +142,38 @@ def run_candidates(
         rows.append(row)
     result = {"rows": rows, "default": choose(rows, margin), "margin_points": margin}
     result |= {"data": str(data), "real": [str(f) for f in real], "frames": frames}
+    result["cpu"] = cpu_name()
     write_text_atomic(out / "results.json", json.dumps(result, indent=1))
     chart(rows, result["default"], out / "latency_accuracy.png")
     write_text_atomic(out / "report.md", report(result))
     return result
 
 
+def cpu_name() -> str:
+    """The CPU's model name (Linux's /proc/cpuinfo), else what `platform` knows."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def command(result: dict) -> str:
+    """The command line that regenerates ``result`` (its report folder as OUT)."""
+    words = ["handskin experiment candidates", f"--data {result['data']}"]
+    words += [f"--real {f}" for f in result["real"]]
+    words += [f'--candidate "{r["name"]}={",".join(r["networks"])}"' for r in result["rows"]]
+    words += [f"--frames {result['frames']}", f"--margin {result['margin_points']:g}", "--out OUT"]
+    return " ".join(words)
+
+
 def chart(rows: list[dict], default: str, png: Path) -> Path:
     from matplotlib.figure import Figure  # start-up: matplotlib
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+    xmax = max(r["median_ms"] for r in rows)
 
     fig = Figure(figsize=(12, 4.8), layout="constrained")
     for ax, key, label in zip(
@@ -173,6 +198,9 @@ def chart(rows: list[dict], default: str, png: Path) -> Path:
         ax.set_xlabel("full answer on one core, median ms (compiled frame path)")
         ax.set_ylabel(label)
         ax.set_xscale("log")
+        ax.xaxis.set_major_formatter(ScalarFormatter())
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xticks([t for t in (0.5, 1, 2, 3, 5, 8, 13, 20) if t < 2 * xmax])
     fig.suptitle(f"candidates for the full answer (star: the default, {default}); dashed: 5 ms")
     return save_figure(fig, png)
 
@@ -187,9 +215,14 @@ def report(result: dict) -> str:
     lines = [
         "# Candidates for the full answer in a robot's loop",
         "",
+        f"Regenerate: `{command(result)}`. Each network trained on the simulated set with "
+        "`handskin train DATA --out RUN --arch ARCH` at its preset, its input size and width "
+        "as its run.toml says.",
+        "",
         f"Simulated test split: `{result['data']}`; real prints: {listed} "
         "(part labels box-derived). Latency: the compiled frame path's full answer on one thread "
-        f"over {result['frames']} test frames, median and p99.",
+        f"over {result['frames']} test frames, median and p99, on one core of "
+        f"{result.get('cpu', 'an unnamed CPU')}.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
