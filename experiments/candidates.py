@@ -25,15 +25,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from experiments import experiment
 from experiments import options as O
-from learn import metrics as M
-from learn.evaluate.real import evaluate_real
-from learn.evaluate.scoring import evaluate_checkpoint, report_rows
-from learn.infer.predict import load_map, load_predictor
-from learn.infer.stream import Recognizer, compiled
 from tactile.dataset import open_dataset
 from tactile.dataset.boxes import is_box_folder
 from tactile.errors import ConfigError, DataError
@@ -66,6 +60,9 @@ def parse_candidate(text: str) -> Candidate:
 
 def simulated_scores(c: Candidate, data: Path) -> dict:
     """Hand / non-hand accuracy, mIoU and mIoU on the hand's pixels on ``data``'s test split."""
+    from learn import metrics as M  # optional: torch (the learn extra)
+    from learn.evaluate.scoring import evaluate_checkpoint, report_rows
+
     rows = [r for p in c.networks for r in report_rows(evaluate_checkpoint(p, data, time_runs=2))]
     clf = next(r for r in rows if r["task"] == "classify")
     seg = next(r for r in rows if r["task"] == "segment")
@@ -79,6 +76,8 @@ def simulated_scores(c: Candidate, data: Path) -> dict:
 
 def real_scores(c: Candidate, folder: Path, negatives: Path) -> dict:
     """Hand recall and part localisation on one real box folder."""
+    from learn.evaluate.real import evaluate_real  # optional: torch (the learn extra)
+
     rows, _ = evaluate_real(folder, list(c.networks), negatives)
     recall = next(r["hand_recall"] for r in rows if "hand_recall" in r)
     localised = next(r["localised"] for r in rows if "localised" in r)
@@ -88,6 +87,11 @@ def real_scores(c: Candidate, folder: Path, negatives: Path) -> dict:
 def latencies(candidates: list[Candidate], data: Path, frames: int) -> dict[str, dict]:
     """Per candidate: median and p99 ms of the compiled frame path's full answer (class, parts,
     per-taxel labels) over ``frames`` test frames on one thread, taking turns block by block."""
+    import torch  # optional: the learn extra
+
+    from learn.infer.predict import load_map, load_predictor
+    from learn.infer.stream import Recognizer, compiled
+
     torch.set_num_threads(1)
     tmap, _, to_pa = load_map(data)
     with open_dataset(data) as ds:

@@ -22,18 +22,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from experiments import experiment
 from experiments import options as O
 from learn.config import SEGNET, RunConfig
-from learn.data.boxes import BoxFolderDataset
-from learn.data.load import Data, TensorData, materialize
-from learn.evaluate.real import part_localisation
-from learn.infer.fastpath import fast_inference
-from learn.infer.predict import Predictor
-from learn.train.checkpoint import load_checkpoint, model_from_checkpoint, run_of
-from learn.train.loop import fit
 from tactile.dataset.boxes import BoxFolder, is_box_folder
 from tactile.errors import ConfigError, DataError
 from tactile.files import save_figure, write_text_atomic
@@ -88,6 +80,10 @@ def recipe(base: RunConfig, k: int, plan: FinetunePlan, draw: int) -> RunConfig:
 
 def localisation(model, run: RunConfig, test: BoxFolder) -> dict:
     """Part localisation of a trained network on the test fold (`learn.evaluate.real`)."""
+    from learn.evaluate.real import part_localisation  # optional: torch (the learn extra)
+    from learn.infer.fastpath import fast_inference
+    from learn.infer.predict import Predictor
+
     pred = Predictor(fast_inference(model), "segment", run.model.input_size, CLASS_NAMES)
     scores, _ = part_localisation(pred, test)
     return {k: scores[k] for k in ("localised", "boxes", "box_iou", "box_iou_above_half")}
@@ -98,6 +94,13 @@ def run_finetune(
 ) -> dict:
     """Every (k, draw, start) run of ``plan``, resumed from ``out/results.json``; returns the
     results and writes the report, the chart and the results."""
+    import torch  # optional: the learn extra
+
+    from learn.data.boxes import BoxFolderDataset
+    from learn.data.load import Data, TensorData, materialize
+    from learn.train.checkpoint import load_checkpoint, model_from_checkpoint, run_of
+    from learn.train.loop import fit
+
     for flag, path in (("--train", train), ("--test", test)):
         if not is_box_folder(path):
             raise DataError(f"{flag} {path}: not a box folder. Fix: handskin ingest-boxes first")

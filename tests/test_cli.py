@@ -80,3 +80,42 @@ def test_part_help_names_every_built_in_part(command: str, option: str | None):
     text = " ".join(param.help.split())
     missing = sorted(set(PARTS) - set(re.findall(r"\w+", text)))
     assert not missing, f"{command} help lacks parts {missing}: {text!r}"
+
+
+#: Python that makes every import of torch fail as in an environment without it (a finder that
+#: refuses it; torch stays out of sys.modules, where SciPy looks for it)
+NO_TORCH = """import importlib.abc, sys
+class NoTorch(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path, target=None):
+        if name.partition(".")[0] == "torch":
+            raise ModuleNotFoundError("No module named 'torch'", name="torch")
+sys.meta_path.insert(0, NoTorch())
+"""
+
+
+def test_the_readme_main_line_needs_no_torch(tmp_path: Path):
+    """The README's first line installs handskin without the learn extra: `handskin`, its help
+    and a small `generate` then `sheet` run in a Python where importing torch fails, and a
+    command that needs torch says how to install it."""
+    import subprocess
+    import sys
+
+    def handskin(*args: str) -> subprocess.CompletedProcess:
+        code = (
+            NO_TORCH
+            + "sys.argv = ['handskin', *sys.argv[1:]]\nfrom handskin.cli import main\nmain()"
+        )
+        return subprocess.run(
+            [sys.executable, "-c", code, *args], capture_output=True, text=True, cwd=tmp_path
+        )
+
+    for args in (["--help"], ["experiment", "candidates", "--help"], ["train", "--help"]):
+        done = handskin(*args)
+        assert done.returncode == 0, done.stderr
+    done = handskin("generate", "--n", "6", "--out", "out", "--no-progress")
+    assert done.returncode == 0, done.stderr
+    done = handskin("sheet", "out", "--png", "sheet.png")
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "sheet.png").read_bytes()[:4] == b"\x89PNG"
+    done = handskin("train", "out", "--out", "run", "--arch", "handsnet")
+    assert done.returncode != 0 and "torch" in done.stderr.lower()
