@@ -6,12 +6,20 @@ import shlex
 from pathlib import Path
 from typing import Annotated
 
+import numpy as np
 import typer
 
-from tactile.dataset.boxes import CONTACT_LEVEL, BoxFolder, is_box_folder, parse_frame
+from tactile.dataset.boxes import (
+    CONTACT_LEVEL,
+    BoxFolder,
+    box_labels,
+    is_box_folder,
+    parse_frame,
+)
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, DataError, HandskinError
 from tactile.files import require_output, write_text_atomic
+from tactile.images.labels import IGNORE
 from tactile.prints.shapes import (
     MIN_BLOB_PX,
     STATISTICS,
@@ -100,6 +108,13 @@ def stats_command(
     min_blob_px: Annotated[
         int, typer.Option(help="Print shapes: blobs of fewer pixels are specks (>= 1).")
     ] = MIN_BLOB_PX,
+    sheet: Annotated[
+        Path | None,
+        typer.Option(
+            help="Box folders: a PNG contact sheet of each input's hand prints side by side, "
+            "their parts coloured (box-derived for a box folder), at 1 mm a pixel."
+        ),
+    ] = None,
     progress: Annotated[
         bool, typer.Option("--progress/--no-progress", help="Show a progress bar.")
     ] = True,
@@ -125,8 +140,13 @@ def stats_command(
         if seed < 0:
             raise ConfigError(f"--seed {seed} is out of range; allowed >= 0")
         if any(is_box_folder(p) for p in paths):
-            shape_report(paths, out, png, classes, frame, level, min_blob_px)
+            shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet)
             return
+        if sheet is not None:
+            raise ConfigError(
+                "--sheet lays hand prints beside real box-labelled ones. Fix: give a box folder "
+                "(handskin ingest-boxes) as DATASET or DATASET2, or leave --sheet out"
+            )
         for path, what in zip(paths, ("DATASET", "DATASET2"), strict=False):
             check_dataset(path, what)
         check_outputs(out, png, paths)
@@ -152,9 +172,10 @@ def stats_command(
             typer.echo(f"{flag}: {path}")
 
 
-def shape_report(paths, out, png, classes, frame, level, min_blob_px) -> None:
+def shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet=None) -> None:
     """`handskin stats` with a box folder among its inputs: the six print statistics of each
-    input side by side, against the first box folder's interquartile range."""
+    input side by side, against the first box folder's interquartile range; with ``sheet``, a
+    contact sheet of each input's hand prints."""
     if not 0 <= level <= 254:
         raise ConfigError(f"--level {level} is out of range; allowed 0..254")
     if min_blob_px < 1:
@@ -168,6 +189,7 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px) -> None:
         else:
             check_dataset(path, what)
     check_outputs(out, png, paths)
+    require_output(sheet, "--sheet", reads=paths, suffixes=(".png",))
     sets: dict[str, Shapes] = {}
     for path, name in zip(paths, names_of(paths), strict=True):
         if path in folders:
@@ -198,15 +220,60 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px) -> None:
         from tactile.prints.plot import save_shapes_png  # start-up: matplotlib
 
         save_shapes_png(sets, png, reference)
+    if sheet is not None:
+        from tactile.figures.sheet import padded, save_contact_sheet  # start-up: matplotlib
+
+        tiles = [
+            t for p, n in zip(paths, sets, strict=True) for t in hand_tiles(p, n, folders, level)
+        ]
+        images, labels, titles = zip(*tiles, strict=True)
+        save_contact_sheet(
+            sheet,
+            padded(images),
+            labels=padded(labels),
+            titles=list(titles),
+            n_cols=SHEET_COLUMNS,
+            title=f"hand prints: {' and '.join(sets)} (parts of a box folder box-derived)",
+            tile_in=2.0,
+        )
     for key, (label, fmt) in STATISTICS.items():
         cells = []
         for name, s in sets.items():
             q = quartiles(s.values[key])
             cells.append(f"{name} {'n/a' if q is None else fmt.format(q[1])}")
         typer.echo(f"{label}, median: " + "; ".join(cells))
-    for flag, path in (("report", out), ("picture", png)):
+    for flag, path in (("report", out), ("picture", png), ("contact sheet", sheet)):
         if path is not None:
             typer.echo(f"{flag}: {path}")
+
+
+SHEET_COLUMNS = 6  # tiles a row of `--sheet`
+SHEET_PRINTS = 12  # hand prints of each input on `--sheet`, evenly spaced over its order
+
+
+def hand_tiles(path: Path, name: str, folders: dict, level: int) -> list[tuple]:
+    """(image, labels, title) of `SHEET_PRINTS` hand prints of one input, evenly spaced over its
+    order: a box folder's prints with box-derived labels (contact in no box left grey), a
+    dataset's hand samples with their label images."""
+    if path in folders:
+        folder = folders[path]
+        picks = np.unique(np.linspace(0, len(folder) - 1, SHEET_PRINTS).round().astype(int))
+        tiles = []
+        for i in picks:
+            p = folder[int(i)]
+            labels = box_labels(p.image, p.boxes, level)
+            tiles.append((p.image, np.where(labels == IGNORE, 0, labels), f"{name} {p.name}"))
+        return tiles
+    with open_dataset(path) as ds:
+        hands = np.flatnonzero(ds["is_hand"][:])
+        if len(hands) == 0:
+            raise DataError(f"{path} holds no hand print for --sheet")
+        picks = hands[np.unique(np.linspace(0, len(hands) - 1, SHEET_PRINTS).round().astype(int))]
+        samples = [ds[int(i)] for i in picks]
+        return [
+            (s["image"], s["label_image"], f"{name} #{i}")
+            for s, i in zip(samples, picks, strict=True)
+        ]
 
 
 def command_words(paths: list[Path], out: Path | None, png: Path | None, seed: int) -> list[str]:

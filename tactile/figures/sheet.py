@@ -91,6 +91,20 @@ def _outline(ax, contacts: np.ndarray) -> None:
             ax.contour(contacts == k, levels=[0.5], colors=[colour], linewidths=0.8)
 
 
+def padded(arrays: Sequence[np.ndarray]) -> np.ndarray:
+    """(B, H, W) stack of (h, w) arrays of one dtype, each at the top left of a zero canvas of the
+    largest height and width: prints of different frames (real and simulated) on one sheet at the
+    same scale (1 mm a pixel for both)."""
+    if not arrays:
+        raise MapError("no image to lay out: give at least one")
+    h = max(a.shape[0] for a in arrays)
+    w = max(a.shape[1] for a in arrays)
+    out = np.zeros((len(arrays), h, w), dtype=np.asarray(arrays[0]).dtype)
+    for k, a in enumerate(arrays):
+        out[k, : a.shape[0], : a.shape[1]] = a
+    return out
+
+
 def save_contact_sheet(path: str | Path, images: np.ndarray, **kw: object) -> Path:
     """Write :func:`contact_sheet` to ``path`` (PNG); keyword arguments go to it."""
     return save_figure(contact_sheet(images, **kw), path, dpi=100)  # type: ignore[arg-type]

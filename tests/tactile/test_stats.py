@@ -339,3 +339,51 @@ def test_a_sample_of_several_contacts_is_described_by_its_first_hand():
     assert list(cols["kind"]) == ["hand", "object"]
     assert list(cols["subject"]) == ["s0003", ""] and list(cols["side"]) == ["left", ""]
     assert list(cols["sex"]) == ["female", ""]
+
+
+def box_folder(root: Path) -> Path:
+    """Three 30 x 40 px prints, each a palm pad (rows 10-19, columns 5-14) in a palm box and a
+    speck in no box (rows 2-3, columns 30-31); YOLO classes palm,thumb."""
+    from PIL import Image
+
+    (root / "images").mkdir(parents=True)
+    (root / "labels").mkdir()
+    for i in range(3):
+        img = np.zeros((30, 40), np.uint8)
+        img[10:20, 5:15] = 100 + 50 * i
+        img[2:4, 30:32] = 90
+        Image.fromarray(img).save(root / "images" / f"{i}.png")
+        (root / "labels" / f"{i}.txt").write_text("0 0.25 0.5 0.3 0.4\n")  # rows 9-21, cols 4-16
+    (root / "data.yaml").write_text("names: [palm, thumb]\n")
+    return root
+
+
+def test_sheet_lays_real_and_simulated_hand_prints_side_by_side(dataset, tmp_path):
+    from tactile.cli.stats import SHEET_PRINTS, hand_tiles
+    from tactile.dataset.boxes import BoxFolder
+    from tactile.images.labels import CLASS_NAMES
+
+    folder = box_folder(tmp_path / "real")
+    opened = {folder: BoxFolder.open(folder)}
+    real = hand_tiles(folder, "real", opened, 4)
+    assert [t[2] for t in real] == ["real 0", "real 1", "real 2"]  # all three: fewer than asked
+    for image, labels, _ in real:
+        expected = np.zeros((30, 40), np.uint8)
+        expected[10:20, 5:15] = CLASS_NAMES.index("palm")  # the speck in no box stays grey (0)
+        assert image.shape == (30, 40) and np.array_equal(labels, expected)
+    with open_dataset(dataset) as ds:
+        hands = np.flatnonzero(ds["is_hand"][:])
+        sim = hand_tiles(dataset, "made", {}, 4)
+        assert len(sim) == min(len(hands), SHEET_PRINTS)
+        for (image, labels, title), i in zip(sim, hands, strict=False):
+            assert title == f"made #{i}"
+            assert np.array_equal(image, ds[int(i)]["image"])
+            assert np.array_equal(labels, ds[int(i)]["label_image"])
+    sheet = tmp_path / "sheet.png"
+    result = runner.invoke(app, ["stats", str(folder), str(dataset), "--sheet", str(sheet)])
+    assert result.exit_code == 0, result.output
+    assert sheet.read_bytes()[:4] == b"\x89PNG"
+    over = runner.invoke(app, ["stats", str(folder), "--sheet", str(folder / "images" / "0.png")])
+    assert over.exit_code == 2 and "--sheet" in over.output
+    alone = runner.invoke(app, ["stats", str(dataset), "--sheet", str(tmp_path / "x.png")])
+    assert alone.exit_code == 2 and "box folder" in alone.output
