@@ -251,13 +251,19 @@ SHEET_COLUMNS = 6  # tiles a row of `--sheet`
 SHEET_PRINTS = 12  # hand prints of each input on `--sheet`, evenly spaced over its order
 
 
+def spaced(n: int) -> np.ndarray:
+    """Up to `SHEET_PRINTS` distinct indices evenly spaced over ``range(n)``, first and last
+    included."""
+    return np.unique(np.linspace(0, n - 1, SHEET_PRINTS).round().astype(int))
+
+
 def hand_tiles(path: Path, name: str, folders: dict, level: int) -> list[tuple]:
     """(image, labels, title) of `SHEET_PRINTS` hand prints of one input, evenly spaced over its
     order: a box folder's prints with box-derived labels (contact in no box left grey), a
     dataset's hand samples with their label images."""
     if path in folders:
         folder = folders[path]
-        picks = np.unique(np.linspace(0, len(folder) - 1, SHEET_PRINTS).round().astype(int))
+        picks = spaced(len(folder))
         tiles = []
         for i in picks:
             p = folder[int(i)]
@@ -268,7 +274,7 @@ def hand_tiles(path: Path, name: str, folders: dict, level: int) -> list[tuple]:
         hands = np.flatnonzero(ds["is_hand"][:])
         if len(hands) == 0:
             raise DataError(f"{path} holds no hand print for --sheet")
-        picks = hands[np.unique(np.linspace(0, len(hands) - 1, SHEET_PRINTS).round().astype(int))]
+        picks = hands[spaced(len(hands))]
         samples = [ds[int(i)] for i in picks]
         return [
             (s["image"], s["label_image"], f"{name} #{i}")
