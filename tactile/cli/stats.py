@@ -21,6 +21,7 @@ from tactile.errors import ConfigError, DataError, HandskinError
 from tactile.files import require_output, write_text_atomic
 from tactile.images.labels import IGNORE
 from tactile.prints.shapes import (
+    LAYOUT,
     MIN_BLOB_PX,
     STATISTICS,
     Shapes,
@@ -236,7 +237,8 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet=None
             title=f"hand prints: {' and '.join(sets)} (parts of a box folder box-derived)",
             tile_in=2.0,
         )
-    for key, (label, fmt) in STATISTICS.items():
+    layout = {k: (f"{label} (box centres), mm", "{:.0f}") for k, label in LAYOUT.items()}
+    for key, (label, fmt) in (STATISTICS | layout).items():
         cells = []
         for name, s in sets.items():
             q = quartiles(s.values[key])

@@ -22,11 +22,17 @@ images) in 8-connected blobs of at least ``min_blob_px`` pixels (30), on a 1 mm 
 
 A simulated print is boxed as a person would box it: one tight box per part around that part's
 contact pixels (`boxes_of_labels`), so both sides go through the same box rule.
+
+Where the parts lie (`part_layout`, `LAYOUT`): distances in mm between the centres of a print's
+part boxes (a part boxed twice: its largest box), averaged over the pairs the print shows: palm
+to each finger, palm to thumb, neighbouring fingers, index to little finger. They say whether a
+simulated hand puts its marks as far apart as real hands do (marks closer than a pad pitch fuse).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 from scipy import ndimage
@@ -37,6 +43,8 @@ from tactile.prints.measures import EIGHT_NEIGHBOURS, action_names
 
 MIN_BLOB_PX = 30  # blobs below this many pixels are specks, not marks (real_hands README)
 PALM = CLASS_NAMES.index("palm")
+THUMB, INDEX, PINKIE = (CLASS_NAMES.index(n) for n in ("thumb", "index", "pinkie"))
+FINGERS = tuple(range(INDEX, PINKIE + 1))  # index, middle, ring, little, in order across the hand
 STATISTICS = {  # name: (what the report calls it, format)
     "blobs": ("separate blobs per print", "{:.0f}"),
     "area_mm2": ("contact area, mm²", "{:,.0f}"),
@@ -46,11 +54,19 @@ STATISTICS = {  # name: (what the report calls it, format)
     "palm_share": ("palm's share of the boxed contact pixels", "{:.2f}"),
 }
 
+LAYOUT = {  # name: what the report calls it (mm between part box centres)
+    "palm_finger_mm": "palm to a finger",
+    "palm_thumb_mm": "palm to thumb",
+    "neighbour_mm": "neighbouring fingers",
+    "index_pinkie_mm": "index to little finger",
+}
+
 
 @dataclass
 class Shapes:
-    """The statistics of S prints: one (S,) float array per name of `STATISTICS` (NaN where a
-    print has no value: no finger boxed, no boxed contact), and each print's ``action``."""
+    """The statistics of S prints: one (S,) float array per name of `STATISTICS` and `LAYOUT`
+    (NaN where a print has no value: no finger boxed, no boxed contact, a part missing), and each
+    print's ``action``."""
 
     values: dict[str, np.ndarray]
     action: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
@@ -104,6 +120,28 @@ def print_shape(
     }
 
 
+def part_layout(boxes: np.ndarray, step_mm: float = 1.0) -> dict[str, float]:
+    """Distances (mm) between the part box centres of one print, ``boxes`` (K, 5+) int (part, r0,
+    r1, c0, c1, ...) on a ``step_mm`` grid, one value per name of `LAYOUT` (NaN where the print
+    lacks the parts): each the mean over the print's pairs of that kind."""
+    centre = {}
+    for part in np.unique(boxes[:, 0]).tolist():
+        b = boxes[boxes[:, 0] == part]
+        big = b[np.argmax((b[:, 2] - b[:, 1]) * (b[:, 4] - b[:, 3]))]
+        centre[part] = step_mm * np.array([big[1] + big[2], big[3] + big[4]], float) / 2.0
+
+    def mean_dist(pairs) -> float:
+        d = [np.linalg.norm(centre[a] - centre[b]) for a, b in pairs if a in centre and b in centre]
+        return float(np.mean(d)) if d else np.nan
+
+    return {
+        "palm_finger_mm": mean_dist((PALM, f) for f in FINGERS),
+        "palm_thumb_mm": mean_dist([(PALM, THUMB)]),
+        "neighbour_mm": mean_dist(pairwise(FINGERS)),
+        "index_pinkie_mm": mean_dist([(INDEX, PINKIE)]),
+    }
+
+
 def boxes_of_labels(
     label_image: np.ndarray,
     image: np.ndarray,
@@ -122,14 +160,17 @@ def boxes_of_labels(
 
 
 def _stack(rows: list[dict[str, float]], action) -> Shapes:
-    values = {k: np.array([r[k] for r in rows], float) for k in STATISTICS}
+    values = {k: np.array([r[k] for r in rows], float) for k in (*STATISTICS, *LAYOUT)}
     return Shapes(values, np.asarray(action, str))
 
 
 def folder_shapes(folder, level: int = CONTACT_LEVEL, min_blob_px: int = MIN_BLOB_PX) -> Shapes:
     """The statistics of every print of a `tactile.dataset.boxes.BoxFolder` (1 mm per pixel in
     its native frame)."""
-    rows = [print_shape(p.image, p.boxes, 1.0, level, min_blob_px) for p in folder]
+    rows = [
+        print_shape(p.image, p.boxes, 1.0, level, min_blob_px) | part_layout(p.boxes)
+        for p in folder
+    ]
     return _stack(rows, np.full(len(rows), "", dtype=object))
 
 
@@ -142,7 +183,7 @@ def dataset_shapes(ds, level: int = CONTACT_LEVEL, min_blob_px: int = MIN_BLOB_P
     for i in hands.tolist():
         image, labels = np.asarray(ds.image[i]), np.asarray(ds.label_image[i])
         boxes = boxes_of_labels(labels, image, level, min_blob_px)
-        rows.append(print_shape(image, boxes, step, level, min_blob_px))
+        rows.append(print_shape(image, boxes, step, level, min_blob_px) | part_layout(boxes, step))
     return _stack(rows, action_names(ds, ds.action[:] if "action" in ds.fields else None)[hands])
 
 
@@ -158,15 +199,25 @@ def inside(value: float, iqr: tuple[float, float, float] | None) -> bool:
 
 
 def shapes_markdown(sets: dict[str, Shapes], reference: str | None = None) -> str:
-    """The six statistics of each named set as median [IQR], side by side; with ``reference``
-    (a set's name), a last column says whether each other set's median lies inside its IQR.
-    Sets with actions get a table of medians by action."""
+    """The six statistics of each named set as median [IQR], side by side, then where the parts
+    lie (`LAYOUT`) alike; with ``reference`` (a set's name), a last column says whether each
+    other set's median lies inside its IQR. Sets with actions get a table of medians by action."""
+    layout = {k: (f"{label}, mm", "{:.0f}") for k, label in LAYOUT.items()}
+    lines = _table(sets, reference, "print statistic", STATISTICS)
+    lines += ["", "Where the parts lie: distances between part box centres.", ""]
+    lines += _table(sets, reference, "part box centres", layout)
+    for n in sets:
+        lines += _by_action(n, sets[n])
+    return "\n".join(lines) + "\n"
+
+
+def _table(sets: dict[str, Shapes], reference: str | None, first: str, items: dict) -> list[str]:
     names = list(sets)
-    head = ["print statistic", *(f"{n} ({len(sets[n])} prints): median [IQR]" for n in names)]
+    head = [first, *(f"{n} ({len(sets[n])} prints): median [IQR]" for n in names)]
     if reference is not None:
         head.append(f"inside {reference}'s IQR")
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for key, (label, fmt) in STATISTICS.items():
+    for key, (label, fmt) in items.items():
         cells = [label]
         for n in names:
             q = quartiles(sets[n].values[key])
@@ -187,9 +238,7 @@ def shapes_markdown(sets: dict[str, Shapes], reference: str | None = None) -> st
                 )
             )
         lines.append("| " + " | ".join(cells) + " |")
-    for n in names:
-        lines += _by_action(n, sets[n])
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def _by_action(name: str, shapes: Shapes) -> list[str]:

@@ -21,7 +21,13 @@ from tactile.dataset.boxes import (
 )
 from tactile.errors import DataError
 from tactile.images.labels import CLASS_NAMES, IGNORE
-from tactile.prints.shapes import boxes_of_labels, folder_shapes, print_shape, quartiles
+from tactile.prints.shapes import (
+    boxes_of_labels,
+    folder_shapes,
+    part_layout,
+    print_shape,
+    quartiles,
+)
 
 PALM, THUMB, INDEX = (CLASS_NAMES.index(n) for n in ("palm", "thumb", "index"))
 ORDER = ["palm", "thumb", "index", "middle", "ring", "pinkie"]  # the real_hands files' order
@@ -129,6 +135,27 @@ def test_print_shape_counted_by_hand():
     s = print_shape(fused, folder_boxes)
     assert s["blobs"] == 2 and s["finger_blobs"] == 0.5  # the index shares its blob now
     assert print_shape(img, folder_boxes, step_mm=2.0)["area_mm2"] == 4 * 410
+
+
+def test_part_layout_measured_by_hand():
+    middle, pinkie = CLASS_NAMES.index("middle"), CLASS_NAMES.index("pinkie")
+    boxes = np.array(
+        [
+            [PALM, 0, 10, 0, 10],  # centre (5, 5)
+            [THUMB, 0, 10, 30, 40],  # (5, 35): 30 from the palm
+            [THUMB, 0, 2, 100, 102],  # a second, smaller thumb box: not the thumb's centre
+            [INDEX, 40, 50, 0, 10],  # (45, 5): 40
+            [middle, 50, 60, 0, 10],  # (55, 5): 50, 10 from the index
+            [pinkie, 70, 80, 0, 10],  # (75, 5): 70, 30 from the index; the ring is missing
+        ]
+    )
+    d = part_layout(boxes)
+    assert d["palm_thumb_mm"] == 30 and d["index_pinkie_mm"] == 30
+    assert d["palm_finger_mm"] == pytest.approx((40 + 50 + 70) / 3)
+    assert d["neighbour_mm"] == 10  # index-middle; middle-ring and ring-pinkie lack the ring
+    assert part_layout(boxes, step_mm=2.0)["palm_thumb_mm"] == 60
+    alone = part_layout(boxes[:1])
+    assert all(np.isnan(v) for v in alone.values())
 
 
 def test_simulated_prints_are_boxed_tightly_around_each_part():
