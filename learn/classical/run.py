@@ -28,11 +28,16 @@ from learn.config import BovwConfig, VggSvmConfig
 from learn.data.folder import HAND_NAMES
 from learn.data.load import materialize, open_split
 from learn.evaluate.contacts import contact_scores, split_contacts
+from learn.evaluate.real import BATCH, trained_on, wilson
 from learn.infer.fastpath import check_timing
+from learn.inputs import net_input
+from learn.numerics import flushing
 from learn.train.checkpoint import versions
 from learn.train.runs import ensure_model
 from learn.train.validation import scores
 from tactile.config import from_dict, read_toml
+from tactile.dataset.boxes import BoxFolder
+from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 
 DEFAULT_SIZE = (68, 100)  # (h, w) px: the paper's network input, also used for BoVW
@@ -278,3 +283,44 @@ def evaluate_classical(
         pred, y = torch.as_tensor(np.asarray(pred, np.int64)), torch.from_numpy(y)
         row |= contact_scores(pred, y, contacts, "classify", len(names))
     return row
+
+
+@flushing()
+def real_hand_scores(
+    path: str | Path, folder: str | Path, negatives: str | Path | None = None
+) -> dict:
+    """A classical model file's row of `learn.evaluate.real.write_real_report`: its hand recall
+    on the box folder ``folder`` (every print a hand) and its non-hand specificity on the test
+    split of ``negatives`` (default: the dataset it was trained on), each image made into the
+    model's input as in training."""
+    model = load_classical(path)
+    negatives = Path(negatives or trained_on(path, (model.meta.get("data") or {}).get("path")))
+    names, size = list(model.meta["class_names"]), tuple(model.meta["input_size"])
+    if "hand" not in names:
+        raise ConfigError(f"{path}: its classes {names} have no 'hand'")
+    hand = names.index("hand")
+    prints = BoxFolder.open(folder)
+    said = [int(model.predict(net_input(p.image, size, "classify")[None])[0]) for p in prints]
+    k, n = sum(s == hand for s in said), len(said)
+    with DatasetReader(negatives) as ds:
+        test = np.sort(np.asarray(ds.splits["test"]))
+        test = test[ds.is_hand[:][test] == 0]
+        if not len(test):
+            raise DataError(f"{negatives}: its test split holds no non-hand to score")
+        right = 0
+        for start in range(0, len(test), BATCH):
+            x = net_input(ds.image[test[start : start + BATCH]], size, "classify")
+            right += int((model.predict(x) != hand).sum())
+    return {
+        "checkpoint": str(path),
+        "task": "classify",
+        "folder": str(folder),
+        "labels_from": "boxes",
+        "hand_recall": k / n,
+        "hand_recall_ci": wilson(k, n),
+        "n_real": n,
+        "negatives": str(negatives),
+        "specificity": right / len(test),
+        "specificity_ci": wilson(right, len(test)),
+        "n_non_hand": len(test),
+    }

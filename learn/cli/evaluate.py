@@ -111,7 +111,8 @@ def evaluate_command(
 
 def real_command(data: Path, checkpoints: list[Path], out: Path, negatives: Path | None) -> None:
     """`handskin evaluate` on a folder of real box-labelled prints (`learn.evaluate.real`)."""
-    from learn.evaluate.real import evaluate_real, real_picture, write_real_report  # torch
+    from learn.classical.run import real_hand_scores  # torch
+    from learn.evaluate.real import evaluate_real, real_picture, write_real_report
 
     try:
         require_folder(out.parent, "--out", "give a file path in a folder")
@@ -120,7 +121,14 @@ def real_command(data: Path, checkpoints: list[Path], out: Path, negatives: Path
         require_output(out, "--out", reads=reads, suffixes=(".md",), derived=beside)
         if negatives is not None:
             check_data(negatives)
-        rows, predictions = evaluate_real(data, checkpoints, negatives)
+        rows, predictions = [], None
+        for path in checkpoints:  # in the order given; the picture shows the last segmenter's
+            if path.suffix == ".npz":
+                rows.append(real_hand_scores(path, data, negatives))
+                continue
+            (row,), seen = evaluate_real(data, [path], negatives)
+            rows.append(row)
+            predictions = seen if seen is not None else predictions
     except (HandskinError, KeyError) as err:
         raise fail(err) from err
     words = ["handskin", "evaluate", str(data), *map(str, checkpoints), "--out", str(out)]

@@ -6,7 +6,8 @@ what ``handskin evaluate`` reports when its data is a box folder.
 
 - A classifier: its **hand recall** on the real prints (every one is a hand), beside its
   **non-hand specificity** on the test split of a simulated dataset (``negatives``; by default
-  the dataset it was trained on), so that a network answering "hand" always cannot score.
+  the dataset it was trained on), so that a classifier answering "hand" always cannot score
+  (the classical ones, BoVW and VGG16 + SVM: `learn.classical.run.real_hand_scores`).
 - A segmenter: **part localisation**. Every contact pixel belongs to the smallest box holding
   it (the rule of the box-derived labels); for every real part box, the segmenter's majority
   class over its pixels is right when it is the box's part (chance about 1 in 6), per part and
@@ -164,7 +165,7 @@ def evaluate_real(
         row = {"checkpoint": str(path), "task": pred.task, "folder": str(folder)}
         row["labels_from"] = "boxes"
         if pred.task in ("classify", "both"):
-            neg = negatives or _trained_on(path)
+            neg = negatives or trained_on(path)
             row |= hand_recall(pred, prints) | {"negatives": str(neg)}
             row |= non_hand_specificity(pred, Path(neg))
         if pred.task in ("segment", "both"):
@@ -176,8 +177,10 @@ def evaluate_real(
     return rows, predictions
 
 
-def _trained_on(path: str | Path) -> Path:
-    data = (load_checkpoint(path).get("data") or {}).get("path")
+def trained_on(path: str | Path, data: str | None = None) -> Path:
+    """The simulated dataset a checkpoint was trained on (``data``: that path, when the caller
+    has read it already), where it gives the non-hands a classifier's specificity is scored on."""
+    data = data or (load_checkpoint(path).get("data") or {}).get("path")
     if not data or not Path(data).exists():
         raise DataError(
             f"{path}: the dataset it was trained on ({data}) is not here to give simulated "

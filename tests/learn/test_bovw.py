@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 import typer
+from PIL import Image
 from scipy.spatial.distance import cdist
 from skimage.draw import disk, line_aa
 from sklearn.svm import LinearSVC
@@ -21,7 +22,7 @@ from learn.classical.bovw import (
     nearest_words,
     word_histogram,
 )
-from learn.classical.run import confusion, load_classical, split_images
+from learn.classical.run import confusion, load_classical, real_hand_scores, split_images
 from learn.classical.svm import MODEL_FILE, LinearSvm
 from learn.cli import register
 from learn.config import BovwConfig
@@ -218,3 +219,25 @@ def test_model_file_errors(tmp_path):
     np.savez(tmp_path / "other.npz", a=np.zeros(3))
     with pytest.raises(DataError, match="not a handskin classical model"):
         load_classical(tmp_path / "other.npz")
+
+
+def test_bovw_scored_on_real_box_prints_as_on_its_test_split(bovw_run, tiny_dataset, tmp_path):
+    """Hand recall on a box folder of the test split's hand prints (one palm box each) and
+    specificity on its non-hands, against the model's answers through the training data path."""
+    model = load_classical(bovw_run / MODEL_FILE)
+    x, y, _ = split_images(tiny_dataset, "test", (32, 48))
+    said = model.predict(x)
+    (tmp_path / "images").mkdir()
+    (tmp_path / "labels").mkdir()
+    with open_dataset(tiny_dataset) as ds:
+        test = np.sort(np.asarray(ds.splits["test"]))
+        hands = test[ds.is_hand[:][test] == 1]
+        for i in hands.tolist():
+            Image.fromarray(np.asarray(ds.image[i])).save(tmp_path / "images" / f"{i}.png")
+            (tmp_path / "labels" / f"{i}.txt").write_text("5 0.5 0.5 1 1\n")
+    (tmp_path / "data.yaml").write_text("names: [thumb, index, middle, ring, pinkie, palm]\n")
+    row = real_hand_scores(bovw_run / MODEL_FILE, tmp_path, tiny_dataset)
+    assert row["task"] == "classify" and row["n_real"] == len(hands) == int((y == 1).sum())
+    assert row["hand_recall"] == pytest.approx(np.mean(said[y == 1] == 1))
+    assert row["n_non_hand"] == int((y == 0).sum())
+    assert row["specificity"] == pytest.approx(np.mean(said[y == 0] == 0))
