@@ -37,10 +37,11 @@ mm wide. The solver's depth is only a fraction of ``w`` at moderate forces, so `
 segment to what a contact must look like, and measured: the pulp's allowance (1.25 x) makes a
 fingertip pressed with 2-5 N on MuJoCo's tactile plate sink 2.5-3 mm and touch 11-14 mm across
 for hands of 15-22 cm (the chord of its capsule end; a pressed finger pad touches about 10-15 mm
-across; tests/sim/test_hand.py); the phalanx pads (5 x) flatten across the finger's width, so a
-finger lying on the link prints a stripe; the palm takes 2.75 x. On the paper-sized default set
-(`handskin stats`, docs/stats.md) a hand contact lights a mean of 42 taxels and the palm holds
-51 % of the labelled hand pixels (the paper: almost 40 %); a single 3.5 mm allowance on every
+across; tests/sim/test_hand.py); the phalanx pads (5 x) flatten across the finger's width,
+each in the middle of its phalanx, clear of the flexion creases (`PAD_SPAN`), so a finger lying
+on the link prints a row of pads; the palm takes 2.75 x. On the paper-sized default set
+(`handskin stats`, docs/stats.md) a hand contact lights a mean of 39 taxels and the palm holds
+54 % of the labelled hand pixels (the paper: almost 40 %); a single 3.5 mm allowance on every
 segment would light a median of 16. The skin model reads pressure from depth, so a part's share
 of a print's pressure follows its allowance more than its force (docs/stats.md).
 
@@ -112,6 +113,14 @@ PART_RGBA = {  # after the palette of Albini & Cannata 2020, Fig. 10
 # `HandConfig.tissue_depth_m` (3.5 mm mean): palm 9.6 mm, phalanx pads 17.5 mm, fingertip pulp
 # 4.4 mm at the mean (module docstring, "Soft tissue").
 TISSUE_RATIO = {"palm": 2.75, "proximal": 5.0, "middle": 5.0, "distal": 1.25}
+# The pad of a proximal or middle phalanx (and the thumb's proximal one): its capsule's segment
+# spans these fractions of the phalanx, so with the capsule's round ends the pad touches about
+# 0.2 x its length + its width (25-30 mm) and the flexion creases over the joints stay clear, as
+# a finger pressed on glass prints one pad per phalanx. Measured against the real prints
+# (../shared/data/real_hands, box-labelled parts; default forearm, 600 hand prints, seed 1): a
+# finger's box 54 mm long (whole capsules, phalanges end to end) -> 46 mm (real: 44 [31, 62]),
+# fingers with a mark of their own 0.25 -> 0.33 (real: 0.60 [0.40, 1.00]).
+PAD_SPAN = np.array([0.4, 0.6])
 # The first metacarpal's own capsule starts this far along it (fraction of its length): its base
 # lies inside the thenar eminence, by the carpus.
 THUMB_METACARPAL_FREE = 0.35
@@ -362,8 +371,8 @@ class _Builder:
                 body = self._body(body, f"{digit}_{seg}", (lengths[k - 1], 0, 0))
                 name, key = joints[k - 1]
                 self._hinge(body, f"{digit}_{name}", (0, 1, 0), JOINT_LIMITS_DEG[key])
-            end = length - r if seg == "distal" else length
-            self._capsule(body, digit, seg, (0, 0, 0), (end, 0, 0), r)
+            start, end = (0.0, length - r) if seg == "distal" else PAD_SPAN * length
+            self._capsule(body, digit, seg, (start, 0, 0), (end, 0, 0), r)
         tip = mirror_pos((lengths[-1], 0, 0), self.cfg.side)
         body.add_site(name=f"{self.p}{digit}_tip", pos=tip, group=SITE_GROUP)
 

@@ -37,14 +37,15 @@ POSE_NOISE_RANGE_DEG = (2.0, 8.0)  # per-subject std of joint-angle noise on gra
 # Habitual finger spread: the angle (degrees) between neighbouring fingers of a hand that meets a
 # link, at the MCP joints: index and ring lean that far from the middle finger, the pinkie twice
 # as far, within the MCP's 20 degrees of abduction (`sim.contactors.interaction_poses.
-# finger_spread`). Uniform 8-16 degrees (was 0-8, assumed): in the real prints the fingertips
-# leave marks of their own (0.60 [IQR 0.40, 1.00] of a print's fingers; index and little
-# fingertips 118 mm [103, 128] apart, 684 prints of ../shared/data/real_hands) and on a skin of
-# 10.6 mm pitch only fingers held apart do so. Measured on the default forearm (160 hand prints,
-# seed 0): the median share of fingers with a mark of their own 0.00 -> 0.20, prints of 4 or more
-# marks 14 % -> 26 %. People open the hand wider for larger objects (Santello et al., J Neurosci
-# 18(23), 1998), and a robot link is larger than any handle.
-FINGER_SPREAD_RANGE_DEG = (8.0, 16.0)
+# finger_spread`). Uniform 16-20 degrees, the hand opened to its limit: in the real prints the
+# fingertips leave marks of their own (0.60 [IQR 0.40, 1.00] of a print's fingers) and the boxes
+# of neighbouring fingers lie 44 mm [40, 51] apart, index and little 120 mm [106, 133]
+# (`handskin stats`, 342 prints of ../shared/data/real_hands fold 1). Measured on the default
+# forearm (600 hand prints, seed 1, with the phalanx pads of `sim.contactors.hand.PAD_SPAN`):
+# 8-16 deg (was) 32 and 81 mm, fingers with a mark of their own 0.33; 16-20 deg 34 and 85 mm,
+# 0.40. People open the hand wider for larger objects (Santello et al., J Neurosci 18(23),
+# 1998), and a robot link is larger than any handle.
+FINGER_SPREAD_RANGE_DEG = (16.0, 20.0)
 FORCE_SCALE_RANGE = (0.2, 5.0)
 APPROACH_RANGE_DEG = (-60.0, 60.0)
 POSE_NOISE_LIMIT_DEG = (0.0, 30.0)

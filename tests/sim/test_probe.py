@@ -77,10 +77,17 @@ def test_contact_radius_sets_the_active_taxels() -> None:
 def test_calibration_saturates_and_grows_monotonically() -> None:
     part = get_part("plate")
     forces = np.linspace(0.0, 40.0, 9)
-    curve = calibration_curve(part, Probe("sphere", (0.02,)), forces, central_taxel(part))
-    assert np.all(np.diff(curve["summed_signal_counts"]) > 0)
-    assert np.all(np.diff(curve["active"]) >= 0)
-    assert curve["saturated"][0] == 0 and curve["saturated"][-1] > 0
+    probe, taxel = Probe("sphere", (0.02,)), central_taxel(part)
+    linear = calibration_curve(part, probe, forces, taxel, SkinConfig(saturation_pa=0.0))
+    assert np.all(np.diff(linear["summed_signal_counts"]) > 0)
+    assert np.all(np.diff(linear["active"]) >= 0)
+    assert linear["saturated"][0] == 0 and linear["saturated"][-1] > 0  # the ADC's full scale
+    # the default pads level off before the converter does: the same presses read less, the
+    # hardest under half as much, and no taxel reaches 65535
+    pads = calibration_curve(part, probe, forces, taxel)
+    assert np.all(np.diff(pads["summed_signal_counts"]) > 0) and not pads["saturated"].any()
+    assert np.all(pads["summed_signal_counts"][1:] < linear["summed_signal_counts"][1:])
+    assert pads["summed_signal_counts"][-1] < 0.5 * linear["summed_signal_counts"][-1]
 
 
 def test_unknown_probe_shape() -> None:

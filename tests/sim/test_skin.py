@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -61,7 +63,11 @@ def test_quantize_rounds_and_saturates() -> None:
 def test_noise_free_frame_keeps_truth_and_gain() -> None:
     pos = lattice_m()
     cfg = SkinConfig(
-        spread_sigma_m=0.0, gain_spread=0.0, baseline_spread_counts=0.0, drift_std_counts_per_s=0.0
+        spread_sigma_m=0.0,
+        gain_spread=0.0,
+        baseline_spread_counts=0.0,
+        drift_std_counts_per_s=0.0,
+        saturation_pa=0.0,  # a linear pad
     )
     skin = SkinInstance.create(pos, cfg, np.random.default_rng(0))
     depth = np.zeros(len(pos))
@@ -74,6 +80,28 @@ def test_noise_free_frame_keeps_truth_and_gain() -> None:
     assert np.all(frame.reading[3:] == round(cfg.baseline_counts))
     # full scale pressure reaches exactly the top of the range
     assert cfg.baseline_counts + cfg.counts_per_pa * cfg.full_scale_pa == pytest.approx(65535)
+
+
+def test_pads_saturate_as_the_closed_form() -> None:
+    pos = lattice_m()
+    cfg = SkinConfig(
+        spread_sigma_m=0.0, gain_spread=0.0, baseline_spread_counts=0.0, drift_std_counts_per_s=0.0
+    )
+    assert cfg.saturation_pa == 5000.0  # the default, fitted to real prints (sim.skin.model)
+    skin = SkinInstance.create(pos, cfg, np.random.default_rng(0))
+    depth = np.zeros(len(pos))
+    depth[:4] = [5e-7, 5e-5, 1e-4, 5e-3]  # 50 Pa, 5 kPa, 10 kPa, 500 kPa
+    frame = skin.frame(depth, rng=None)
+    np.testing.assert_allclose(frame.pressure_pa[:4], [50.0, 5e3, 1e4, 5e5])  # truth unsaturated
+    read_pa = (frame.reading[:4] - cfg.baseline_counts) / cfg.counts_per_pa
+    # p_sat (1 - e^(-p / p_sat)): 49.75 Pa, p_sat (1 - 1/e), p_sat (1 - 1/e^2), p_sat; within
+    # half a count (rounding)
+    expect = 5000.0 * (1.0 - np.exp(-np.array([0.01, 1.0, 2.0, 100.0])))
+    np.testing.assert_allclose(read_pa, expect, atol=0.5 / cfg.counts_per_pa)
+    linear = SkinInstance.create(pos, replace(cfg, saturation_pa=0.0), np.random.default_rng(0))
+    lin_pa = (linear.frame(depth, rng=None).reading[:2] - cfg.baseline_counts) / cfg.counts_per_pa
+    assert abs(read_pa[0] - lin_pa[0]) <= 1.0 / cfg.counts_per_pa  # light touches stay linear
+    assert read_pa[1] < 0.64 * lin_pa[1]
 
 
 def test_noise_and_drift_statistics_seeded() -> None:
