@@ -28,7 +28,7 @@ from learn.config import BovwConfig, VggSvmConfig
 from learn.data.folder import HAND_NAMES
 from learn.data.load import materialize, open_split
 from learn.evaluate.contacts import contact_scores, split_contacts
-from learn.evaluate.real import BATCH, trained_on, wilson
+from learn.evaluate.real import BATCH, split_non_hands, trained_on, wilson
 from learn.infer.fastpath import check_timing
 from learn.inputs import net_input
 from learn.numerics import flushing
@@ -303,10 +303,7 @@ def real_hand_scores(
     said = [int(model.predict(net_input(p.image, size, "classify")[None])[0]) for p in prints]
     k, n = sum(s == hand for s in said), len(said)
     with DatasetReader(negatives) as ds:
-        test = np.sort(np.asarray(ds.splits["test"]))
-        test = test[ds.is_hand[:][test] == 0]
-        if not len(test):
-            raise DataError(f"{negatives}: its test split holds no non-hand to score")
+        test = split_non_hands(ds, negatives)
         right = 0
         for start in range(0, len(test), BATCH):
             x = net_input(ds.image[test[start : start + BATCH]], size, "classify")

@@ -71,15 +71,22 @@ def hand_recall(pred: Predictor, folder: BoxFolder) -> dict:
     return {"hand_recall": k / n, "hand_recall_ci": wilson(k, n), "n_real": n}
 
 
+def split_non_hands(ds: DatasetReader, name: str | Path) -> np.ndarray:
+    """Sorted indices of the non-hands in the test split of ``ds`` (the dataset ``name``);
+    DataError when there is none."""
+    test = np.sort(np.asarray(ds.splits["test"]))
+    test = test[ds.is_hand[:][test] == 0]
+    if not len(test):
+        raise DataError(f"{name}: its test split holds no non-hand to score")
+    return test
+
+
 @flushing()
 def non_hand_specificity(pred: Predictor, negatives: Path) -> dict:
     """How many of the non-hands of ``negatives``' test split the classifier calls non-hand."""
     hand = _hand_index(pred)
     with DatasetReader(negatives) as ds:
-        test = np.sort(np.asarray(ds.splits["test"]))
-        test = test[ds.is_hand[:][test] == 0]
-        if not len(test):
-            raise DataError(f"{negatives}: its test split holds no non-hand to score")
+        test = split_non_hands(ds, negatives)
         canvas = pred.canvas(ds.map.step_mm)
         right = 0
         for start in range(0, len(test), BATCH):
