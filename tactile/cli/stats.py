@@ -191,6 +191,10 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet=None
             check_dataset(path, what)
     check_outputs(out, png, paths)
     require_output(sheet, "--sheet", reads=paths, suffixes=(".png",))
+    tiles = []  # the sheet's prints, read before any statistic is written
+    if sheet is not None:
+        for path, name in zip(paths, names_of(paths), strict=True):
+            tiles += hand_tiles(path, name, folders, level)
     sets: dict[str, Shapes] = {}
     for path, name in zip(paths, names_of(paths), strict=True):
         if path in folders:
@@ -224,9 +228,6 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet=None
     if sheet is not None:
         from tactile.figures.sheet import padded, save_contact_sheet  # start-up: matplotlib
 
-        tiles = [
-            t for p, n in zip(paths, sets, strict=True) for t in hand_tiles(p, n, folders, level)
-        ]
         images, labels, titles = zip(*tiles, strict=True)
         save_contact_sheet(
             sheet,

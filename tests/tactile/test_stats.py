@@ -387,3 +387,25 @@ def test_sheet_lays_real_and_simulated_hand_prints_side_by_side(dataset, tmp_pat
     assert over.exit_code == 2 and "--sheet" in over.output
     alone = runner.invoke(app, ["stats", str(dataset), "--sheet", str(tmp_path / "x.png")])
     assert alone.exit_code == 2 and "box folder" in alone.output
+
+
+def test_sheet_without_hand_prints_is_refused_before_any_output(part, tmp_path):
+    layout, tmap = part
+    objects = tmp_path / "objects"
+    w = DatasetWriter(
+        objects,
+        config={},
+        part="sector",
+        generator_version="test-1",
+        seed=3,
+        tmap=tmap,
+        layout=layout,
+        attrs={"skin_counts_per_pa": 1.0},
+    )
+    w.write_chunk(0, [object_sample(tmap, k) for k in range(2)])
+    w.merge()
+    folder, report = box_folder(tmp_path / "real"), tmp_path / "shapes.md"
+    args = ["stats", str(folder), str(objects), "--out", str(report)]
+    result = runner.invoke(app, [*args, "--sheet", str(tmp_path / "sheet.png")])
+    assert result.exit_code == 2 and "no hand print" in result.output
+    assert not report.exists() and not (tmp_path / "sheet.png").exists()
