@@ -86,10 +86,9 @@ def _sample(tmap, p, labels, action: int, desc: dict, force_n: float) -> dict:
     }
 
 
-@pytest.fixture(scope="module")
-def dataset(tmp_path_factory, part) -> Path:
+def write_set(folder: Path, part, samples: list[dict]) -> Path:
+    """A merged dataset of ``samples`` on the test sector ``part`` (layout, map)."""
     layout, tmap = part
-    folder = tmp_path_factory.mktemp("stats") / "made"
     w = DatasetWriter(
         folder,
         config={"episode": {"active_pa": ACTIVE_PA}},
@@ -100,10 +99,17 @@ def dataset(tmp_path_factory, part) -> Path:
         layout=layout,
         attrs={"skin_counts_per_pa": 1.0, "skin_baseline_counts": 4000.0, "actions": ACTIONS},
     )
-    samples = [hand_sample(tmap, layout, k) for k in range(len(HANDS))]
-    w.write_chunk(0, samples + [object_sample(tmap, k) for k in range(2)])
+    w.write_chunk(0, samples)
     w.merge()
     return folder
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory, part) -> Path:
+    layout, tmap = part
+    samples = [hand_sample(tmap, layout, k) for k in range(len(HANDS))]
+    objects = [object_sample(tmap, k) for k in range(2)]
+    return write_set(tmp_path_factory.mktemp("stats") / "made", part, samples + objects)
 
 
 @pytest.fixture(scope="module")
@@ -390,20 +396,7 @@ def test_sheet_lays_real_and_simulated_hand_prints_side_by_side(dataset, tmp_pat
 
 
 def test_sheet_without_hand_prints_is_refused_before_any_output(part, tmp_path):
-    layout, tmap = part
-    objects = tmp_path / "objects"
-    w = DatasetWriter(
-        objects,
-        config={},
-        part="sector",
-        generator_version="test-1",
-        seed=3,
-        tmap=tmap,
-        layout=layout,
-        attrs={"skin_counts_per_pa": 1.0},
-    )
-    w.write_chunk(0, [object_sample(tmap, k) for k in range(2)])
-    w.merge()
+    objects = write_set(tmp_path / "objects", part, [object_sample(part[1], k) for k in range(2)])
     folder, report = box_folder(tmp_path / "real"), tmp_path / "shapes.md"
     args = ["stats", str(folder), str(objects), "--out", str(report)]
     result = runner.invoke(app, [*args, "--sheet", str(tmp_path / "sheet.png")])
