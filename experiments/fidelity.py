@@ -30,6 +30,7 @@ from experiments.fidelity_prints import print_statistics
 from experiments.fidelity_report import write_report
 from experiments.report import Report
 from learn.config import preset_run
+from sim.skin import DEFAULT_PART
 from tactile.dataset.manifest import jsonable, read_manifest
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, DataError
@@ -177,7 +178,7 @@ def run_fidelity(
     *,
     settings=None,
     quick=False,
-    part="forearm",
+    part=DEFAULT_PART,
     base=None,
     datasets=None,
     progress=True,
@@ -259,7 +260,7 @@ def fidelity(
     settings: SettingsOpt = None,
     n: O.opt(int | None, "Samples per setting (count; default 2000, --quick 240).", "--n") = None,
     epochs: O.opt(int, "Training epochs of each probe (count).") = 20,
-    part: PartOpt = "forearm",
+    part: PartOpt = DEFAULT_PART,
     segmentation: O.SegmentationOpt = False,
     workers: O.opt(int | None, "Generator processes (count; default: all cores).") = None,
     device: O.DeviceOpt = "cpu",

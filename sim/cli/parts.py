@@ -15,6 +15,7 @@ import typer
 from assets import ASSETS_DIR
 from sim.cli.generate import echo_warnings
 from sim.cli.generate import register as register_generate
+from sim.skin import DEFAULT_PART
 from tactile.errors import ConfigError, HandskinError, require_positive
 from tactile.files import require_output, save_figure, staged
 from tactile.images.tactile_map import TactileMap
@@ -54,7 +55,7 @@ def part_command(
             metavar="NAME",
             help="Part name: forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector or plate.",
         ),
-    ] = "forearm",
+    ] = DEFAULT_PART,
     mesh: Annotated[
         Path | None,
         typer.Option(
@@ -121,7 +122,7 @@ def part_command(
 
 
 def probe_command(
-    part: Annotated[str, typer.Option(help="Part to probe at its central taxel.")] = "forearm",
+    part: Annotated[str, typer.Option(help="Part to probe at its central taxel.")] = DEFAULT_PART,
     png: Annotated[Path | None, typer.Option(help="Write the calibration chart (PNG).")] = None,
     max_force: Annotated[float, typer.Option(help="Largest indenter force, N.")] = 40.0,
     n_forces: Annotated[int, typer.Option(help="Number of forces from 0 to max-force.")] = 61,

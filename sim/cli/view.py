@@ -17,6 +17,7 @@ import numpy as np
 import typer
 from PIL import Image
 
+from sim.skin import DEFAULT_PART
 from tactile.config import from_dict
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, DataError, HandskinError, require_positive
@@ -216,7 +217,7 @@ def view_command(
             help="Part of a simulated sample: forearm, forearm_8mm, forearm_x2, forearm_x4, "
             "end_effector or plate."
         ),
-    ] = "forearm",
+    ] = DEFAULT_PART,
     seed: Annotated[int, typer.Option(help="Dataset seed of a simulated sample.")] = 0,
     color: Annotated[
         str,

@@ -148,7 +148,7 @@ def read_frame(scene: PressScene, skin: SkinInstance, active_pa: float, time_s: 
 
 def sensed_pressure(skin: SkinInstance, reading: np.ndarray, time_s: float) -> np.ndarray:
     """Pressure (N,) Pa as the robot reads it (`SkinInstance.readout`: the known baseline and
-    drift removed, 3 noise sd floor, nominal gain) — what a dataset's readers reproduce."""
+    drift removed, 4 noise sd floor, nominal gain) — what a dataset's readers reproduce."""
     return skin.readout().pressure_pa(reading, time_s)
 
 

@@ -132,17 +132,19 @@ def scene_spec(
     timestep_s: float,
     solver_iterations: int = 100,
     link_file: str | None = None,
+    skin_file: str | None = None,
 ) -> mujoco.MjSpec:
     """The press scene spec: options (time step, s; the solver's iteration cap), the part (its
-    link mesh read from ``link_file`` when given, `sim.episode.scene.link_mesh_file`), each
-    contactor under its press body."""
+    link and sensor meshes read from ``link_file`` / ``skin_file`` when given,
+    `sim.episode.scene.link_mesh_file` / `skin_mesh_file`), each contactor under its press
+    body."""
     contactors = _as_list(contactors)
     spec = mujoco.MjSpec()
     spec.modelname = f"{part.name}_press_{'_'.join(c.name for c in contactors)}"
     set_hand_options(spec, timestep_s)
     spec.option.iterations = int(solver_iterations)
     spec.option.gravity = [0.0, 0.0, 0.0]  # forces are the commanded ones
-    add_part(spec, part, link_file=link_file)
+    add_part(spec, part, link_file=link_file, skin_file=skin_file)
     for k, c in enumerate(contactors):
         press = spec.worldbody.add_body(name=press_name(k))
         spec.attach(c.spec.copy(), frame=press.add_frame(), prefix=prefix(k))
@@ -160,11 +162,14 @@ def build_press_scene(
     timestep_s: float,
     solver_iterations: int = 100,
     link_file: str | None = None,
+    skin_file: str | None = None,
 ) -> PressScene:
     """Compile the press scene of ``contactors`` (one or several) on ``part`` and index its
     named elements."""
     contactors = _as_list(contactors)
-    model = scene_spec(part, contactors, timestep_s, solver_iterations, link_file).compile()
+    model = scene_spec(
+        part, contactors, timestep_s, solver_iterations, link_file, skin_file
+    ).compile()
     names = [(k, n) for k, c in enumerate(contactors) for n in sorted(c.geom_labels)]
     readout = TaxelReadout(
         model, f"{PART_PREFIX}tactile", f"{PART_PREFIX}skin", [prefix(k) + n for k, n in names]

@@ -41,7 +41,8 @@ from sim.episode.frames import (
     tactile_images,
 )
 from sim.episode.mjlog import mujoco_warnings_logged
-from sim.episode.scene import link_mesh_file
+from sim.episode.scene import link_mesh_file, skin_mesh_file
+from sim.skin import DEFAULT_PART
 from sim.skin.model import SkinConfig, SkinInstance
 from sim.skin.parts import Part, get_part
 from tactile.dataset.schema import MAX_CONTACTS
@@ -59,7 +60,7 @@ SENSOR_BIT = int(mujoco.mjtDisableBit.mjDSBL_SENSOR)
 class EpisodeConfig:
     """Runner settings (SI units)."""
 
-    part: str = "forearm"  # `sim.skin.parts.get_part` name
+    part: str = DEFAULT_PART  # `sim.skin.parts.get_part` name
     timestep_s: float = 0.005  # implicitfast + soft tissue (solref 10 ms, 2 steps) stable at 5 ms
     # MuJoCo's cap on constraint-solver iterations per step (opt.iterations; Newton solver). The
     # forearm's presses take 1.1 on average and at most 4 (docs/fidelity.md), so 100 never binds.
@@ -103,7 +104,8 @@ class EpisodeContext:
             self.part.layout.positions_m, self.cfg.skin, rng, self.part.sensor_faces
         )
         self.along = placement.link_axis(self.part)
-        self.link_file = link_mesh_file(self.part)  # compiled once, then from MuJoCo's cache
+        # link and sensor meshes as files: compiled once, then from MuJoCo's mesh cache
+        self.mesh_files = link_mesh_file(self.part), skin_mesh_file(self.part)
         self._cache: OrderedDict[str, press.PressScene] = OrderedDict()
 
     def scene(self, contactor: ContactorSpec | Sequence[ContactorSpec]) -> press.PressScene:
@@ -114,7 +116,7 @@ class EpisodeContext:
             self._cache.move_to_end(key)
             return self._cache[key]
         scene = press.build_press_scene(
-            self.part, contactor, self.cfg.timestep_s, self.cfg.solver_iterations, self.link_file
+            self.part, contactor, self.cfg.timestep_s, self.cfg.solver_iterations, *self.mesh_files
         )
         self._cache[key] = scene
         if len(self._cache) > self.cfg.cache_size:

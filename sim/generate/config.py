@@ -21,6 +21,7 @@ from typing import Any
 from handskin import __version__
 from sim.contactors.hand import HAND_DETAILS
 from sim.episode.runner import EpisodeConfig
+from sim.skin import DEFAULT_PART
 from sim.skin.parts import PARTS
 from tactile.config import RECORD_WHEN_SET, from_dict, load_config, override
 from tactile.dataset.manifest import MANIFEST, read_manifest
@@ -86,9 +87,10 @@ class GenerateConfig:
     Defaults reproduce the paper's dataset size and class balance on the forearm.
     """
 
-    # Built-in part (forearm, end_effector, plate) or a link mesh file (.stl/.obj, metres),
-    # covered like Baxter W0 (`sim.skin.parts.W0_REGION`); the mesh's sha256 enters the fingerprint.
-    part: str = "forearm"
+    # Built-in part (`sim.skin.parts.PARTS`; `sim.skin.DEFAULT_PART`, the forearm at 7.6 mm pad
+    # pitch) or a link mesh file (.stl/.obj, metres), covered like Baxter W0
+    # (`sim.skin.parts.W0_REGION`); the mesh's sha256 enters the fingerprint.
+    part: str = DEFAULT_PART
     n: int = PAPER_SAMPLES  # samples in the dataset (3,530 as in the paper)
     # Fraction of hand samples, unitless; 1710/3530 as in the paper. Sample i's class is fixed by
     # `sim.generate.sampler.is_hand_index` (exact over every prefix, independent of n).

@@ -145,7 +145,7 @@ def simulate_scene(cfg: GenerateConfig, index: int) -> Simulated:
 
 def sequence_pressure(ctx: EpisodeContext, seq_raw: np.ndarray, length: int) -> np.ndarray:
     """Pressure (T, N) Pa of the first ``length`` frames of ``seq_raw`` (T', N) counts, read as
-    the robot reads them (`sim.episode.frames.sensed_pressure`: baseline, drift and 3 noise sd
+    the robot reads them (`sim.episode.frames.sensed_pressure`: baseline, drift and 4 noise sd
     removed; frames at 10 Hz)."""
     return np.stack(
         [

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from assets import ASSETS_DIR
+from sim.episode import press
 from sim.episode.mjcf import probe_contactor, write_part
-from sim.episode.scene import SkinScene
+from sim.episode.scene import PART_PREFIX, SkinScene, link_mesh_file, skin_mesh_file
 from sim.skin.parts import PARTS, get_part
 
 ASSET_XMLS = sorted(ASSETS_DIR.glob("*/*.xml"))
@@ -82,3 +83,34 @@ def test_committed_layouts_match_the_generator(name: str) -> None:
     fresh = get_part(name).layout
     np.testing.assert_allclose(committed.positions_m, fresh.positions_m, atol=1e-9)
     np.testing.assert_array_equal(committed.module_ids, fresh.module_ids)
+
+
+@pytest.mark.parametrize("name", ["forearm", "forearm_x2"])
+def test_meshes_read_from_cached_files_compile_to_the_inline_model(name):
+    """A press scene with its link and sensor meshes read from the OBJ files that MuJoCo's
+    compiler caches holds the same arrays, bit for bit, as with the meshes inline: the taxels
+    keep their layout order, so the tactile sensor reads the same taxels."""
+    part = get_part(name)
+    inline = press.scene_spec(part, [], 0.005).compile()
+    files = link_mesh_file(part), skin_mesh_file(part)
+    assert None not in files, "no writable temporary folder for the mesh cache"
+    cached = press.scene_spec(part, [], 0.005, 100, *files).compile()
+    for attr in (
+        "mesh_vert",
+        "mesh_face",
+        "mesh_normal",
+        "mesh_vertnum",
+        "body_mass",
+        "body_inertia",
+        "geom_pos",
+        "geom_quat",
+        "sensor_dim",
+    ):
+        assert np.array_equal(getattr(inline, attr), getattr(cached, attr)), attr
+    k = inline.mesh(f"{PART_PREFIX}skin").id  # stored in its own frame (mesh_pos, mesh_quat)
+    start = int(inline.mesh_vertadr[k])
+    stored = inline.mesh_vert[start : start + int(inline.mesh_vertnum[k])].astype(float)
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, inline.mesh_quat[k])
+    link_frame = stored @ rot.reshape(3, 3).T + inline.mesh_pos[k]
+    np.testing.assert_allclose(link_frame, part.layout.positions_m, atol=1e-6)  # float32, m

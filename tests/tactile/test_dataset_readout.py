@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tactile.dataset.readout import NOISE_FLOOR_SIGMAS, Readout
+from tactile.dataset.readout import LEGACY_FLOOR_SIGMAS, Readout
 from tactile.errors import DataError
 
 ATTRS = {
@@ -30,7 +30,7 @@ def test_missing_attrs_are_the_identity_and_legacy_floor_comes_from_the_config()
     raw = np.array([0, 250, 400])
     np.testing.assert_array_equal(Readout.of({}).pressure_pa(raw), [0.0, 250.0, 400.0])
     legacy = {"config": {"episode": {"skin": {"noise_std_counts": 100.0}}}}
-    assert Readout.of(legacy).floor_counts == NOISE_FLOOR_SIGMAS * 100.0
+    assert Readout.of(legacy).floor_counts == LEGACY_FLOOR_SIGMAS * 100.0
     np.testing.assert_array_equal(Readout.of(legacy).pressure_pa(raw), [0.0, 0.0, 400.0])
 
 

@@ -97,6 +97,20 @@ def test_batched_interpolate_equals_frames(forearm: TactileMap) -> None:
     np.testing.assert_allclose(single, batch, rtol=1e-5, atol=1e-6)
 
 
+def test_box_interpolation_equals_the_whole_grid(forearm: TactileMap) -> None:
+    """One frame's box is gathered per pixel, a batch's through the table's rows; both are the
+    whole grid's values on the box. Each pixel sums its taxels in the table's order, so they
+    agree to the last bit unless a build of scipy fuses multiply-adds (1 ulp: rtol 1e-12)."""
+    rng = np.random.default_rng(9)
+    p = rng.random((4, forearm.n_taxels)) * (rng.random((4, forearm.n_taxels)) < 0.3)
+    rows, cols = slice(5, forearm.shape[0] - 7), slice(11, forearm.shape[1] // 2)
+    whole = forearm.interpolate(p)[:, rows, cols]
+    np.testing.assert_allclose(forearm.interpolate_box(p, rows, cols), whole, rtol=1e-12, atol=0)
+    for frame, expected in zip(p, whole, strict=True):
+        box = forearm.interpolate_box(frame, rows, cols)
+        np.testing.assert_allclose(box, expected, rtol=1e-12, atol=0)
+
+
 def slow_image(tmap: TactileMap, p: np.ndarray, erode_px: int, dilate_px: int) -> np.ndarray:
     """The paper's image, written directly: matplotlib K, floor formula, skimage morphology."""
     k = reference_interpolation(tmap, p).filled(0.0)
