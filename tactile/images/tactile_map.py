@@ -230,10 +230,11 @@ class TactileMap:
         (B, h, w) float64 (a batch as a view on pixel-major memory, as `interpolate`)."""
         height, width = self.shape
         r, c = range(*rows.indices(height)), range(*cols.indices(width))
-        index, weight = self._lut_rows
-        index = index.reshape(height, width, -1)[r.start : r.stop, c.start : c.stop]
-        weight = weight.reshape(height, width, -1)[r.start : r.stop, c.start : c.stop]
         if np.ndim(p) == 1:  # gathered: 3x faster than the table's rows for one frame
+            index, weight = (
+                a.reshape(height, width, -1)[r.start : r.stop, c.start : c.stop]
+                for a in self._lut_rows
+            )
             p = np.asarray(p, dtype=np.float64)
             values = weight[..., 0] * p[index[..., 0]]
             for j in range(1, index.shape[-1]):
