@@ -15,7 +15,7 @@ import typer
 from assets import ASSETS_DIR
 from sim.cli.generate import echo_warnings
 from sim.cli.generate import register as register_generate
-from sim.skin import DEFAULT_PART
+from sim.skin import DEFAULT_PART, MAP_STEP_MM
 from tactile.errors import ConfigError, HandskinError, require_positive
 from tactile.files import require_output, save_figure, staged
 from tactile.images.tactile_map import TactileMap
@@ -53,7 +53,8 @@ def part_command(
         str,
         typer.Argument(
             metavar="NAME",
-            help="Part name: forearm, forearm_8mm, forearm_x2, forearm_x4, end_effector or plate.",
+            help="Part name: forearm, forearm_8mm, forearm_x2, forearm_x3, forearm_x4, "
+            "end_effector or plate.",
         ),
     ] = DEFAULT_PART,
     mesh: Annotated[
@@ -73,7 +74,9 @@ def part_command(
         Path | None,
         typer.Option(help="Write the part's MJCF, link STL and taxel layout under this folder."),
     ] = None,
-    step_mm: Annotated[float, typer.Option(help="Tactile map grid step, mm/pixel.")] = 1.0,
+    step_mm: Annotated[
+        float, typer.Option(help="Tactile map grid step, mm of skin a pixel (the paper's: 0.735).")
+    ] = MAP_STEP_MM,
     views: Annotated[
         str,
         typer.Option(

@@ -42,7 +42,7 @@ from sim.episode.frames import (
 )
 from sim.episode.mjlog import mujoco_warnings_logged
 from sim.episode.scene import link_mesh_file, skin_mesh_file
-from sim.skin import DEFAULT_PART
+from sim.skin import DEFAULT_PART, MAP_STEP_MM
 from sim.skin.model import SkinConfig, SkinInstance
 from sim.skin.parts import Part, get_part
 from tactile.dataset.schema import MAX_CONTACTS
@@ -61,6 +61,7 @@ class EpisodeConfig:
     """Runner settings (SI units)."""
 
     part: str = DEFAULT_PART  # `sim.skin.parts.get_part` name
+    map_step_mm: float = MAP_STEP_MM  # skin under a pixel of the tactile images, mm
     timestep_s: float = 0.005  # implicitfast + soft tissue (solref 10 ms, 2 steps) stable at 5 ms
     # MuJoCo's cap on constraint-solver iterations per step (opt.iterations; Newton solver). The
     # forearm's presses take 1.1 on average and at most 4 (docs/fidelity.md), so 100 never binds.
@@ -98,7 +99,7 @@ class EpisodeContext:
                 f"episode.min_active_taxels = {self.cfg.min_active_taxels} is more than the "
                 f"{n_taxels} taxels of part {self.cfg.part!r}; lower it"
             )
-        self.tmap = TactileMap.build(self.part.layout)
+        self.tmap = TactileMap.build(self.part.layout, step_mm=self.cfg.map_step_mm)
         rng = np.random.default_rng(np.random.SeedSequence(self.cfg.skin_seed, spawn_key=(2**31,)))
         self.skin = SkinInstance.create(
             self.part.layout.positions_m, self.cfg.skin, rng, self.part.sensor_faces

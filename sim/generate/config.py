@@ -46,6 +46,7 @@ RANGES: dict[str, tuple[float | None, float | None]] = {
     "duration_scale": (0.1, 2.0),
     "sequence_frames": (1, 600),
     "episode.timestep_s": (1e-4, 0.01),
+    "episode.map_step_mm": (0.1, 5.0),
     "episode.solver_iterations": (1, 1000),
     "episode.skin_seed": (0, 2**63 - 1),
     "episode.active_pa": (0.0, 1e6),

@@ -82,7 +82,8 @@ def finer_forearm_tiling(n_rows: int) -> Tiling:
     the forearm's bare module stay bare. Same box, taxel density (n_rows / 5)² times as high:
     parts `forearm_x2` (7 rows, 7.6 mm) and `forearm_x4` (10 rows, 5.3 mm) ask how much the
     taxel density limits what a network can read from a print (docs/findings.md, "A denser
-    skin": at x2 SegNet's mIoU rises by 17 points, HandsNet's accuracy by nothing measurable).
+    skin": at x2 SegNet's mIoU rises by 17 points, HandsNet's accuracy by nothing measurable);
+    `forearm_x3` (9 rows, 5.9 mm, 3.2 times) is the default skin (`sim.skin.DEFAULT_PART`).
     """
     big = FOREARM_TILING
     if n_rows < 1:
@@ -220,6 +221,7 @@ PARTS: dict[str, Callable[[], Part]] = {
     "forearm": forearm,
     "forearm_8mm": forearm_8mm,
     "forearm_x2": lambda: finer_forearm(7, "forearm_x2"),
+    "forearm_x3": lambda: finer_forearm(9, "forearm_x3"),
     "forearm_x4": lambda: finer_forearm(10, "forearm_x4"),
     "end_effector": end_effector,
     "plate": plate,

@@ -11,6 +11,7 @@ import typer
 
 from tactile.dataset.boxes import (
     CONTACT_LEVEL,
+    PAPER_PIXEL_MM,
     BoxFolder,
     box_labels,
     is_box_folder,
@@ -21,10 +22,12 @@ from tactile.errors import ConfigError, DataError, HandskinError
 from tactile.files import require_output, write_text_atomic
 from tactile.images.labels import IGNORE
 from tactile.prints.shapes import (
+    CHIRALITY,
     LAYOUT,
     MIN_BLOB_PX,
     STATISTICS,
     Shapes,
+    chirality,
     dataset_shapes,
     folder_shapes,
     quartiles,
@@ -99,10 +102,14 @@ def stats_command(
     frame: Annotated[
         str | None,
         typer.Option(
-            help="Box folders: the images' native frame, ROWSxCOLUMNS px at 1 mm, that each "
+            help="Box folders: the images' native frame, ROWSxCOLUMNS px, that each "
             "stretched image is resized back to, e.g. 247x362 (default: as stored)."
         ),
     ] = None,
+    box_step_mm: Annotated[
+        float,
+        typer.Option(help="Box folders: mm of skin a pixel (the paper's images, docs/stats.md)."),
+    ] = PAPER_PIXEL_MM,
     level: Annotated[
         int, typer.Option(help="Print shapes: contact is a grey level above this (0..254).")
     ] = CONTACT_LEVEL,
@@ -113,7 +120,7 @@ def stats_command(
         Path | None,
         typer.Option(
             help="Box folders: a PNG contact sheet of each input's hand prints side by side, "
-            "their parts coloured (box-derived for a box folder), at 1 mm a pixel."
+            "their parts coloured (box-derived for a box folder)."
         ),
     ] = None,
     progress: Annotated[
@@ -127,21 +134,19 @@ def stats_command(
     contactor kind and action, with 95 % bootstrap intervals over samples; the published range
     beside each figure that has one (the seed paper's people and Fig. 10; finger force sharing
     in grip, Li 2002 and J Hand Surg 2014) and whether the figure lies inside it. Works on
-    generated datasets and ingested recordings (a figure the dataset cannot give reads "not in
-    this dataset"); two datasets are laid side by side.
+    generated datasets and ingested recordings; two are laid side by side.
 
-    A folder of real box-labelled prints (images/ and YOLO labels/, the real_hands layout) is
-    described by six statistics of the print's shape (blobs, contact area in mm², span in mm,
-    parts boxed, the share of fingers that leave a blob of their own, the palm's share of the
-    boxed contact), as median and interquartile range; a dataset beside it is measured alike on
-    its hand prints (each part boxed tightly around its contact pixels), by action too.
+    A folder of real box-labelled prints (the real_hands layout) is described by six statistics
+    of the print's shape (blobs, area mm², span mm, parts boxed, fingers with a blob of their
+    own, the palm's share), where the parts lie and which way the hand is drawn; a dataset
+    beside it is measured alike on its hand prints (each part boxed tightly), by action too.
     """
     paths = [dataset] if dataset2 is None else [dataset, dataset2]
     try:
         if seed < 0:
             raise ConfigError(f"--seed {seed} is out of range; allowed >= 0")
         if any(is_box_folder(p) for p in paths):
-            shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet)
+            shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet, box_step_mm)
             return
         if sheet is not None:
             raise ConfigError(
@@ -173,7 +178,9 @@ def stats_command(
             typer.echo(f"{flag}: {path}")
 
 
-def shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet=None) -> None:
+def shape_report(
+    paths, out, png, classes, frame, level, min_blob_px, sheet=None, box_step_mm=PAPER_PIXEL_MM
+) -> None:
     """`handskin stats` with a box folder among its inputs: the six print statistics of each
     input side by side, against the first box folder's interquartile range; with ``sheet``, a
     contact sheet of each input's hand prints."""
@@ -181,6 +188,8 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet=None
         raise ConfigError(f"--level {level} is out of range; allowed 0..254")
     if min_blob_px < 1:
         raise ConfigError(f"--min-blob-px {min_blob_px} is out of range; allowed >= 1")
+    if not 0.05 <= box_step_mm <= 20:
+        raise ConfigError(f"--box-step-mm {box_step_mm} is out of range; allowed 0.05..20 mm")
     names = [c.strip() for c in classes.split(",")] if classes else None
     frame_px = parse_frame(frame)
     folders = {}
@@ -198,7 +207,7 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet=None
     sets: dict[str, Shapes] = {}
     for path, name in zip(paths, names_of(paths), strict=True):
         if path in folders:
-            sets[name] = folder_shapes(folders[path], level, min_blob_px)
+            sets[name] = folder_shapes(folders[path], level, min_blob_px, box_step_mm)
             continue
         with open_dataset(path) as ds:
             if "label_image" not in ds.fields:
@@ -212,11 +221,13 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet=None
             ("--frame", frame, None),
             ("--level", level, CONTACT_LEVEL),
             ("--min-blob-px", min_blob_px, MIN_BLOB_PX),
+            ("--box-step-mm", box_step_mm, PAPER_PIXEL_MM),
         ):
             words += [flag, str(value)] if value != default else []
         rule = (
             f"Contact: grey level above {level}, in 8-connected blobs of at least {min_blob_px} "
-            "px, at 1 mm. A simulated print's parts are boxed tightly around their contact "
+            f"px; a box folder's pixel read as {box_step_mm:g} mm of skin, a dataset's at its "
+            "map's step. A simulated print's parts are boxed tightly around their contact "
             "pixels; labels inside boxes are box-derived (the smallest box holding a pixel)."
         )
         head = f"# Print shapes: {' and '.join(sets)}\n\nRegenerate: `{shlex.join(words)}`\n\n"
@@ -245,6 +256,10 @@ def shape_report(paths, out, png, classes, frame, level, min_blob_px, sheet=None
             q = quartiles(s.values[key])
             cells.append(f"{name} {'n/a' if q is None else fmt.format(q[1])}")
         typer.echo(f"{label}, median: " + "; ".join(cells))
+    typer.echo(
+        f"{CHIRALITY['thumb_right']}, share: "
+        + "; ".join(f"{name} {chirality(s):.2f}" for name, s in sets.items())
+    )
     for flag, path in (("report", out), ("picture", png), ("contact sheet", sheet)):
         if path is not None:
             typer.echo(f"{flag}: {path}")

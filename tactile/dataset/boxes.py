@@ -43,6 +43,12 @@ CONTACT_LEVEL = 4  # grey levels 1..4 are resampling residue, not contact (real_
 EDGE_PX = 1e-3  # px: YOLO files round to 6 decimals, 4e-4 px of a 362 px frame
 LABELS_FROM = "boxes"  # what a box-derived label image says it was made from
 ALIASES = {"little": "pinkie", "pinky": "pinkie", "little_finger": "pinkie"}
+# Skin under a pixel of the paper's tactile images, mm. Their grid is 1 mm of their flat map, but
+# the hands that made the real prints put their part boxes 1.33-1.40 times (mean 1.36) as far
+# apart as hands of the paper's sizes (15-22 cm) do on a map at 1 mm of skin: palm to finger,
+# palm to thumb, neighbouring fingers, index to little finger (docs/stats.md). `handskin stats`
+# reads box folders at this step; the generator draws its images on this grid.
+PAPER_PIXEL_MM = 0.735
 
 
 @dataclass(frozen=True)

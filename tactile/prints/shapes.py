@@ -8,8 +8,9 @@ is, and which parts it shows.
     shapes_markdown({"fold1": real, "default set": sim})
 
 Contact: grey level above ``level`` (4: levels 1 to 4 are resampling residue of the real
-images) in 8-connected blobs of at least ``min_blob_px`` pixels (30), on a 1 mm grid
-(``step_mm``). The statistics of a print:
+images) in 8-connected blobs of at least ``min_blob_px`` pixels (30), on a grid of ``step_mm``
+mm of skin a pixel (the paper's images: `tactile.dataset.boxes.PAPER_PIXEL_MM`). The statistics
+of a print:
 
 - ``blobs``: its separate blobs;
 - ``area_mm2``: its contact pixels times the pixel area;
@@ -27,6 +28,12 @@ Where the parts lie (`part_layout`, `LAYOUT`): distances in mm between the centr
 part boxes (a part boxed twice: its largest box), averaged over the pairs the print shows: palm
 to each finger, palm to thumb, neighbouring fingers, index to little finger. They say whether a
 simulated hand puts its marks as far apart as real hands do (marks closer than a pad pitch fuse).
+
+Which way a print is drawn (`CHIRALITY`): ``thumb_right`` is 1 when the thumb's box lies to the
+right of the line from the palm's box to the fingers' (their mean centre), with the fingers
+pointing up and rows running down, 0 when to the left (NaN without palm, thumb and a finger): a
+right hand seen through the skin, as the paper's images show it, reads 1; the same hand seen from
+outside reads 0. Its mean over a set is the share of prints drawn like a right hand.
 """
 
 from __future__ import annotations
@@ -60,6 +67,7 @@ LAYOUT = {  # name: what the report calls it (mm between part box centres)
     "neighbour_mm": "neighbouring fingers",
     "index_pinkie_mm": "index to little finger",
 }
+CHIRALITY = {"thumb_right": "prints drawn like a right hand (thumb right of the fingers)"}
 
 
 @dataclass
@@ -123,7 +131,8 @@ def print_shape(
 def part_layout(boxes: np.ndarray, step_mm: float = 1.0) -> dict[str, float]:
     """Distances (mm) between the part box centres of one print, ``boxes`` (K, 5+) int (part, r0,
     r1, c0, c1, ...) on a ``step_mm`` grid, one value per name of `LAYOUT` (NaN where the print
-    lacks the parts): each the mean over the print's pairs of that kind."""
+    lacks the parts): each the mean over the print's pairs of that kind; and ``thumb_right``
+    (`CHIRALITY`)."""
     centre = {}
     for part in np.unique(boxes[:, 0]).tolist():
         b = boxes[boxes[:, 0] == part]
@@ -134,7 +143,13 @@ def part_layout(boxes: np.ndarray, step_mm: float = 1.0) -> dict[str, float]:
         d = [np.linalg.norm(centre[a] - centre[b]) for a, b in pairs if a in centre and b in centre]
         return float(np.mean(d)) if d else np.nan
 
+    fingers = [centre[f] for f in FINGERS if f in centre]
+    thumb_right = np.nan
+    if PALM in centre and THUMB in centre and fingers:
+        (vr, vc), (wr, wc) = np.mean(fingers, axis=0) - centre[PALM], centre[THUMB] - centre[PALM]
+        thumb_right = float(vc * wr - vr * wc > 0)
     return {
+        "thumb_right": thumb_right,
         "palm_finger_mm": mean_dist((PALM, f) for f in FINGERS),
         "palm_thumb_mm": mean_dist([(PALM, THUMB)]),
         "neighbour_mm": mean_dist(pairwise(FINGERS)),
@@ -160,15 +175,17 @@ def boxes_of_labels(
 
 
 def _stack(rows: list[dict[str, float]], action) -> Shapes:
-    values = {k: np.array([r[k] for r in rows], float) for k in (*STATISTICS, *LAYOUT)}
+    values = {k: np.array([r[k] for r in rows], float) for k in (*STATISTICS, *LAYOUT, *CHIRALITY)}
     return Shapes(values, np.asarray(action, str))
 
 
-def folder_shapes(folder, level: int = CONTACT_LEVEL, min_blob_px: int = MIN_BLOB_PX) -> Shapes:
-    """The statistics of every print of a `tactile.dataset.boxes.BoxFolder` (1 mm per pixel in
-    its native frame)."""
+def folder_shapes(
+    folder, level: int = CONTACT_LEVEL, min_blob_px: int = MIN_BLOB_PX, step_mm: float = 1.0
+) -> Shapes:
+    """The statistics of every print of a `tactile.dataset.boxes.BoxFolder`, ``step_mm`` mm of
+    skin a pixel of its native frame (1.0: in pixels; the paper's images: `PAPER_PIXEL_MM`)."""
     rows = [
-        print_shape(p.image, p.boxes, 1.0, level, min_blob_px) | part_layout(p.boxes)
+        print_shape(p.image, p.boxes, step_mm, level, min_blob_px) | part_layout(p.boxes, step_mm)
         for p in folder
     ]
     return _stack(rows, np.full(len(rows), "", dtype=object))
@@ -185,6 +202,13 @@ def dataset_shapes(ds, level: int = CONTACT_LEVEL, min_blob_px: int = MIN_BLOB_P
         boxes = boxes_of_labels(labels, image, level, min_blob_px)
         rows.append(print_shape(image, boxes, step, level, min_blob_px) | part_layout(boxes, step))
     return _stack(rows, action_names(ds, ds.action[:] if "action" in ds.fields else None)[hands])
+
+
+def chirality(shapes: Shapes) -> float:
+    """The share of a set's prints drawn like a right hand (`CHIRALITY`; NaN without any)."""
+    x = shapes.values["thumb_right"]
+    x = x[np.isfinite(x)]
+    return float(x.mean()) if len(x) else np.nan
 
 
 def quartiles(x: np.ndarray) -> tuple[float, float, float] | None:
@@ -206,6 +230,9 @@ def shapes_markdown(sets: dict[str, Shapes], reference: str | None = None) -> st
     lines = _table(sets, reference, "print statistic", STATISTICS)
     lines += ["", "Where the parts lie: distances between part box centres.", ""]
     lines += _table(sets, reference, "part box centres", layout)
+    shares = [f"{n} {chirality(sets[n]):.2f}" for n in sets if np.isfinite(chirality(sets[n]))]
+    if shares:
+        lines += ["", f"Share of {CHIRALITY['thumb_right']}: {', '.join(shares)}."]
     for n in sets:
         lines += _by_action(n, sets[n])
     return "\n".join(lines) + "\n"

@@ -19,6 +19,7 @@ from experiments import transfer as T
 from experiments import transfer_runs as R
 from experiments.cli import register
 from experiments.transfer_runs import nested_order
+from learn.inputs import input_canvas
 from learn.train.checkpoint import load_checkpoint, model_from_checkpoint
 from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError
@@ -222,8 +223,9 @@ def test_keep_scale_feeds_the_forearm_model_images_centred_at_the_forearm_scale(
     got = again(source, out, tmp_path, s=s, classifier=ckpt)["classify"]
     model, run = model_from_checkpoint(load_checkpoint(ckpt))
     with DatasetReader(data["source"]) as ds:
-        canvas = ds.map.shape  # 1 mm grid
+        canvas_mm = [float(n * ds.map.step_mm) for n in ds.map.shape]
     with DatasetReader(data["target"]) as ds:
+        canvas = input_canvas(canvas_mm, ds.map.step_mm)  # the source's mm on the target's grid
         test = ds.splits["test"]
         image = ds.image[np.sort(test)][np.argsort(np.argsort(test))]
         truth = ds.is_hand[:][test]
@@ -238,14 +240,14 @@ def test_keep_scale_feeds_the_forearm_model_images_centred_at_the_forearm_scale(
         logits = model(x)
     zero = got["zero_shot"]["forearm at scale"]["metrics"]["accuracy"]
     near_ties.assert_rate(zero, np.mean(logits.argmax(1).numpy() == truth), logits)
-    assert got["canvas_mm"] == [float(c) for c in canvas]
+    assert got["canvas_mm"] == canvas_mm
     assert list(got["curve"]) == ["scratch", "forearm", "synthetic EE", "forearm at scale"]
     for k in range(3):
         assert len({tuple(got["curve"][i][k]["samples"]) for i in got["curve"]}) == 1
     assert got["curve"]["forearm"] == res["classify"]["curve"]["forearm"]  # unchanged rows
     text = (tmp_path / "report.md").read_text()
     assert "source model at its scale (canvas)" in text and "from forearm at scale %" in text
-    assert f"{canvas[0]} × {canvas[1]} mm canvas" in text
+    assert f"{canvas_mm[0]:g} × {canvas_mm[1]:g} mm canvas" in text
 
 
 def test_keep_scale_refuses_a_model_that_already_has_a_canvas(transfer_run, tmp_path):

@@ -1,4 +1,5 @@
-"""Denser forearm skins (`forearm_x2`, `forearm_x4`): the forearm's box, smaller modules."""
+"""Denser forearm skins (`forearm_x2`, `forearm_x3`, `forearm_x4`): the forearm's box, smaller
+modules; the default one marks a single pad on the default grid as a real CySkin pad."""
 
 from __future__ import annotations
 
@@ -6,13 +7,14 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from sim.skin import DEFAULT_PART, MAP_STEP_MM
 from sim.skin.parts import FOREARM_TILING, SKIN_PITCH_MM, finer_forearm_tiling, get_part
 from sim.skin.tiling import module_lattice
 from tactile.errors import ConfigError
 from tactile.figures.maps import coverage_mask
 from tactile.images.tactile_map import TactileMap
 
-ROWS = {"forearm_x2": 7, "forearm_x4": 10}
+ROWS = {"forearm_x2": 7, "forearm_x3": 9, "forearm_x4": 10}
 
 
 def test_five_rows_is_the_forearm_itself() -> None:
@@ -57,3 +59,17 @@ def test_pitch_density_box_and_hole(name: str) -> None:
 def test_finer_forearm_refuses_no_rows() -> None:
     with pytest.raises(ConfigError, match="n_rows >= 1"):
         finer_forearm_tiling(0)
+
+
+def test_the_default_skin_marks_a_single_pad_as_a_real_pad() -> None:
+    """A real print's single-pad mark covers 250-300 px (docs/stats.md, ../shared/data/
+    real_hands): one pressed taxel of the default skin, on the default grid, through the paper's
+    image (grey level above 4 after erosion r 2 and dilation r 4), median over 60 taxels."""
+    part = get_part(DEFAULT_PART)
+    tmap = TactileMap.build(part.layout, step_mm=MAP_STEP_MM)
+    areas = []
+    for k in np.random.default_rng(0).choice(tmap.n_taxels, 60, replace=False):
+        p = np.zeros(tmap.n_taxels)
+        p[k] = 1.0
+        areas.append(int((tmap.image(p) > 4).sum()))
+    assert 250 <= np.median(areas) <= 300, np.median(areas)

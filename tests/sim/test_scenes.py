@@ -85,7 +85,7 @@ def test_committed_layouts_match_the_generator(name: str) -> None:
     np.testing.assert_array_equal(committed.module_ids, fresh.module_ids)
 
 
-@pytest.mark.parametrize("name", ["forearm", "forearm_x2"])
+@pytest.mark.parametrize("name", ["forearm", "forearm_x3"])
 def test_meshes_read_from_cached_files_compile_to_the_inline_model(name):
     """A press scene with its link and sensor meshes read from the OBJ files that MuJoCo's
     compiler caches holds the same arrays, bit for bit, as with the meshes inline: the taxels

@@ -12,6 +12,7 @@ from PIL import Image
 from scipy import ndimage
 
 from tactile.dataset.boxes import (
+    PAPER_PIXEL_MM,
     BoxFolder,
     box_labels,
     box_members,
@@ -154,6 +155,11 @@ def test_part_layout_measured_by_hand():
     assert d["palm_finger_mm"] == pytest.approx((40 + 50 + 70) / 3)
     assert d["neighbour_mm"] == 10  # index-middle; middle-ring and ring-pinkie lack the ring
     assert part_layout(boxes, step_mm=2.0)["palm_thumb_mm"] == 60
+    # fingers below the palm (rows down) and the thumb to its right: turned up, a left hand
+    assert d["thumb_right"] == 0.0
+    up = boxes.copy()
+    up[:, 1:3] = 80 - up[:, 2:0:-1]  # mirrored top to bottom: fingers up, thumb still right
+    assert part_layout(up)["thumb_right"] == 1.0
     alone = part_layout(boxes[:1])
     assert all(np.isnan(v) for v in alone.values())
 
@@ -227,6 +233,15 @@ def test_the_real_fold_reads_as_its_readme_says(real_fold):
     assert 0.88 <= np.mean(np.array(parts) >= 5) <= 0.94
 
 
+def test_real_prints_are_drawn_as_right_hands_in_the_papers_share(real_fold):
+    """77.8 % of the paper's people were right-handed; the share of real prints whose thumb lies
+    right of the fingers (rows down, fingers up) is that, within 3 binomial sd (fold 1: 0.78)."""
+    s = folder_shapes(real_fold)
+    right = s.values["thumb_right"][np.isfinite(s.values["thumb_right"])]
+    sd = np.sqrt(0.778 * 0.222 / len(right))
+    assert abs(right.mean() - 0.778) < 3 * sd, f"{right.mean():.3f} of {len(right)}"
+
+
 def test_real_prints_break_into_marks(real_fold):
     """The published description of the folds: prints wrap the forearm (a span near the map's
     width), broken into several marks, most fingers apart from the palm."""
@@ -234,3 +249,24 @@ def test_real_prints_break_into_marks(real_fold):
     assert quartiles(s.values["blobs"])[1] >= 4
     assert 200 <= quartiles(s.values["span_mm"])[1] <= 247
     assert quartiles(s.values["finger_blobs"])[1] >= 0.4
+
+
+def test_stats_reads_a_box_folder_at_the_step_given(tmp_path):
+    """`handskin stats --box-step-mm`: mm of skin a pixel of a box folder (the paper's images:
+    `PAPER_PIXEL_MM` by default); out of range, refused before any output."""
+    from typer.testing import CliRunner
+
+    from handskin.cli import app
+
+    root = write_folder(tmp_path / "f", [drawn_print()], yaml=f"names: {ORDER}\n")
+    runner, spans = CliRunner(), {}
+    for step in ("1", "2", None):
+        args = ["stats", str(root)] + ([] if step is None else ["--box-step-mm", step])
+        result = runner.invoke(app, args)
+        assert result.exit_code == 0, result.output
+        line = next(x for x in result.output.splitlines() if x.startswith("span of the print"))
+        spans[step] = float(line.rsplit(" ", 1)[1])
+    assert spans["1"] == 40 and spans["2"] == 80 and spans[None] == round(40 * PAPER_PIXEL_MM)
+    out = tmp_path / "r.md"
+    bad = runner.invoke(app, ["stats", str(root), "--box-step-mm", "0", "--out", str(out)])
+    assert bad.exit_code == 2 and "--box-step-mm" in bad.output and not out.exists()

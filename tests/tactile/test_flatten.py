@@ -63,9 +63,27 @@ def test_developable_patch_is_isometric(radius_m: float, method: str) -> None:
     assert (np.abs(ratio - 1.0) < tol + np.abs(arc_gap)).all()
     if radius_m >= 0.075:
         assert np.abs(ratio - 1.0).max() < tol
-    residual = _rigid_residual_mm(flat.taxel_uv_mm, exact)
+    # exact (arc length, axis) is the sector seen from outside; the map is seen from inside
+    residual = _rigid_residual_mm(flat.taxel_uv_mm, exact * np.array([1.0, -1.0]))
     assert residual.max() < (1.0 if method == "arap" else 3.0)
     assert flat.n_patches == 1 and flat.seams == 0 and flat.distortion.n_flipped == 0
+
+
+def test_the_map_shows_the_skin_seen_from_inside() -> None:
+    """Three taxels counter-clockwise seen from outside (about their outward normal) run
+    clockwise on the map: the mirror image the paper's tactile images show."""
+    layout, _ = cylinder_sector_layout(
+        radius_m=0.075, width_mm=150.0, length_mm=200.0, pitch_mm=11.0
+    )
+    flat = _flat(layout)
+    p, n, uv = layout.positions_m, layout.normals, flat.taxel_uv_mm
+    near = np.argsort(np.linalg.norm(p[:, None] - p[None], axis=2), axis=1)[:, 1:7]
+    for a, b, c in zip(range(len(p)), near[:, 0], near[:, 2], strict=True):  # two neighbours
+        outside = np.dot(np.cross(p[b] - p[a], p[c] - p[a]), n[a])
+        d1, d2 = uv[b] - uv[a], uv[c] - uv[a]
+        on_map = d1[0] * d2[1] - d1[1] * d2[0]
+        if abs(outside) > 1e-9 and abs(on_map) > 1e-3:
+            assert np.sign(on_map) == -np.sign(outside)
 
 
 def _edges(faces: np.ndarray) -> np.ndarray:
