@@ -66,6 +66,9 @@ class PressPlan:
     joint_targets : contactor joint name (unprefixed) -> target (rad) reached under torque limits.
     preshape : names in ``joint_targets`` held at their targets from the start (the shape a hand
         takes in the air, such as its finger spread); the others close after the palm lands.
+    standoff_m : 0 = the root sinks onto the skin and presses (`sim.episode.press`); > 0 = it
+        is held this far above the skin point, so that only the joints closing on the link touch
+        (a hand gripping with its digits, the palm clear), m.
     """
 
     site_uv: tuple[float, float] | None = None
@@ -79,10 +82,15 @@ class PressPlan:
     durations_s: tuple[float, float, float, float] = (0.2, 0.3, 0.3, 0.2)
     action: int = -1
     operator_position: int = -1
+    standoff_m: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.force_n > 0:
             raise ConfigError(f"PressPlan.force_n={self.force_n!r} must be > 0 N")
+        if not 0.0 <= self.standoff_m < 0.03:
+            raise ConfigError(
+                f"PressPlan.standoff_m={self.standoff_m!r}: give 0 (press) up to 0.03 m"
+            )
         stray = sorted(set(self.preshape) - set(self.joint_targets))
         if stray:
             raise ConfigError(

@@ -11,8 +11,10 @@ episode of the same contactor, only `body_pos`/`body_quat` of ``press`` and the 
 Schedule (`root_schedule`, `schedule`; 100 Hz ticks precomputed per episode): approach = the
 root target descends from `APPROACH_HEIGHT_M` to the skin point; load = it sinks
 `PRESS_DEPTH_M` below while the normal force is capped at the plan's `force_n` (a force-limited
-servo: the force ramps with the target, then saturates); hold = the shear slides and the yaw
-hinge pull towards far targets capped at the plan's shear and twist; release = back up.
+servo: the force ramps with the target, then saturates; a plan with a standoff stops that far
+above the skin point instead and only the closing joints touch, `PressPlan.standoff_m`); hold =
+the shear slides and the yaw hinge pull towards far targets capped at the plan's shear and
+twist; release = back up.
 Contactor joints (fingers) stay at 0 during the approach and go to their plan targets during the
 load, torque-limited by the contactor's own actuators: a hand's palm lands first, then the
 fingers close (fingers closing during the approach would meet the link before the palm and prop
@@ -209,7 +211,12 @@ def root_schedule(plan: PressPlan, times_s: np.ndarray) -> tuple[np.ndarray, np.
     a, lo, h, _ = np.cumsum(plan.durations_s)
     sink = _ramp(t, a, lo) - _ramp(t, h, plan.total_s)
     hold = _ramp(t, lo, lo + 0.5 * plan.durations_s[2]) * (t < h)
-    z = APPROACH_HEIGHT_M * (1.0 - _ramp(t, 0.0, a) + _ramp(t, h, plan.total_s))
+    up = 1.0 - _ramp(t, 0.0, a) + _ramp(t, h, plan.total_s)
+    if plan.standoff_m > 0:  # held off the skin: no sink, the closing joints grip
+        sink = np.zeros_like(t)
+        z = plan.standoff_m + (APPROACH_HEIGHT_M - plan.standoff_m) * up
+    else:
+        z = APPROACH_HEIGHT_M * up
     shear, twist = np.asarray(plan.shear_n, dtype=float), plan.twist_nm
     target = np.column_stack(
         [

@@ -26,12 +26,14 @@ from tactile.prints.shapes import (
     LAYOUT,
     MIN_BLOB_PX,
     STATISTICS,
+    WITHOUT_PALM,
     Shapes,
     chirality,
     dataset_shapes,
     folder_shapes,
     quartiles,
     shapes_markdown,
+    without_palm,
 )
 from tactile.prints.stats import dataset_stats, stats_markdown, summary_lines
 
@@ -259,6 +261,10 @@ def shape_report(
     typer.echo(
         f"{CHIRALITY['thumb_right']}, share: "
         + "; ".join(f"{name} {chirality(s):.2f}" for name, s in sets.items())
+    )
+    typer.echo(
+        f"{WITHOUT_PALM}, share: "
+        + "; ".join(f"{name} {without_palm(s):.2f}" for name, s in sets.items())
     )
     for flag, path in (("report", out), ("picture", png), ("contact sheet", sheet)):
         if path is not None:

@@ -68,6 +68,7 @@ LAYOUT = {  # name: what the report calls it (mm between part box centres)
     "index_pinkie_mm": "index to little finger",
 }
 CHIRALITY = {"thumb_right": "prints drawn like a right hand (thumb right of the fingers)"}
+WITHOUT_PALM = "prints without a palm (the digits alone)"
 
 
 @dataclass
@@ -211,6 +212,14 @@ def chirality(shapes: Shapes) -> float:
     return float(x.mean()) if len(x) else np.nan
 
 
+def without_palm(shapes: Shapes) -> float:
+    """The share of a set's prints with no palm pixel (``palm_share`` 0: the digits alone
+    touched; NaN without any print). Real folds: 31 %."""
+    x = shapes.values["palm_share"]
+    x = x[np.isfinite(x)]
+    return float((x == 0).mean()) if len(x) else np.nan
+
+
 def quartiles(x: np.ndarray) -> tuple[float, float, float] | None:
     """(25th percentile, median, 75th percentile) of the finite values, None without any."""
     x = x[np.isfinite(x)]
@@ -233,6 +242,8 @@ def shapes_markdown(sets: dict[str, Shapes], reference: str | None = None) -> st
     shares = [f"{n} {chirality(sets[n]):.2f}" for n in sets if np.isfinite(chirality(sets[n]))]
     if shares:
         lines += ["", f"Share of {CHIRALITY['thumb_right']}: {', '.join(shares)}."]
+    palmless = [f"{n} {without_palm(sets[n]):.2f}" for n in sets if len(sets[n].values["blobs"])]
+    lines += ["", f"Share of {WITHOUT_PALM}: {', '.join(palmless)}."]
     for n in sets:
         lines += _by_action(n, sets[n])
     return "\n".join(lines) + "\n"

@@ -224,3 +224,21 @@ def test_sequence_phases_end_where_the_frames_do():
         assert int(kept["seq_length"]) <= int(np.floor(phases[-1] / FRAME_DT_S + 1e-6))
         assert int(kept["seq_length"]) >= int(np.floor(phases[2] / FRAME_DT_S + 1e-6))
         assert float(kept["time_s"]) <= phases[2] + 1e-6  # selected within load and hold
+
+
+def test_a_standoff_holds_the_root_off_the_skin_and_a_press_sinks():
+    """The root's normal target: from `APPROACH_HEIGHT_M` down to the standoff and back, never
+    below it (the closing joints alone touch); without one it sinks `PRESS_DEPTH_M` below."""
+    t = np.linspace(0.0, 1.0, 201)
+    held = PressPlan(standoff_m=0.012, durations_s=(0.2, 0.3, 0.3, 0.2))
+    z = press.root_schedule(held, t)[0][:, 2]
+    assert z[0] == pytest.approx(press.APPROACH_HEIGHT_M) and z.min() == pytest.approx(0.012)
+    assert np.all(z[(t >= 0.2) & (t <= 0.8)] == pytest.approx(0.012))
+    sunk = press.root_schedule(dataclasses.replace(held, standoff_m=0.0), t)[0][:, 2]
+    assert sunk.min() == pytest.approx(-press.PRESS_DEPTH_M)
+
+
+@pytest.mark.parametrize("standoff", [-0.001, 0.03, float("nan")])
+def test_a_standoff_out_of_range_is_refused(standoff):
+    with pytest.raises(ConfigError, match="standoff_m"):
+        PressPlan(standoff_m=standoff)

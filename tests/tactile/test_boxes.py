@@ -28,6 +28,7 @@ from tactile.prints.shapes import (
     part_layout,
     print_shape,
     quartiles,
+    without_palm,
 )
 
 PALM, THUMB, INDEX = (CLASS_NAMES.index(n) for n in ("palm", "thumb", "index"))
@@ -231,6 +232,14 @@ def test_the_real_fold_reads_as_its_readme_says(real_fold):
     parts = [len(set(real_fold[i].boxes[:, 0].tolist())) for i in range(len(real_fold))]
     assert real_fold[0].image.shape == (247, 362)
     assert 0.88 <= np.mean(np.array(parts) >= 5) <= 0.94
+
+
+def test_the_share_without_a_palm_counts_the_prints_with_no_palm_box(real_fold):
+    """`without_palm` reads the boxed pixels; counted from the label files instead: the prints
+    with no palm box (fold 1: 106 of 342)."""
+    no_box = np.mean([PALM not in real_fold[i].boxes[:, 0] for i in range(len(real_fold))])
+    assert without_palm(folder_shapes(real_fold)) == pytest.approx(no_box, abs=2 / len(real_fold))
+    assert 0.25 <= no_box <= 0.37
 
 
 def test_real_prints_are_drawn_as_right_hands_in_the_papers_share(real_fold):
