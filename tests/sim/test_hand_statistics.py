@@ -19,6 +19,7 @@ from sim.contactors.spec import ACTIONS
 from sim.contactors.subjects import sample_subjects
 from sim.episode.runner import EpisodeContext
 from sim.generate.hands import sample_hand
+from tactile.dataset.boxes import BoxFolder
 from tactile.prints.shapes import boxes_of_labels, part_layout
 
 N_SAMPLES, SEED = 320, 2020
@@ -92,8 +93,6 @@ def test_the_share_of_prints_without_the_palm_is_the_real_one(stats, shared_data
     """In the real folds 31 % of hand prints have no palm box (fingers and thumb alone: the palm
     held clear of the skin); the generated hand prints lack a palm label as often, within 3
     binomial sd of the two counts (before the digits-alone grips: 2.9 % of 581)."""
-    from tactile.dataset.boxes import BoxFolder
-
     real = []
     for fold in ("fold1", "fold2"):
         path = shared_data / "real_hands" / fold
