@@ -248,7 +248,9 @@ def _check_warp() -> None:
 
 SettingsOpt = O.opt(str | None, f"Settings to run, comma-separated, of {', '.join(FS.BY_NAME)}.")
 # as sim.skin.parts
-PARTS = "forearm, forearm_8mm, forearm_x2, forearm_x3, forearm_x4, end_effector, plate"
+PARTS = (
+    "forearm_paper, forearm, forearm_8mm, forearm_x2, forearm_x3, forearm_x4, end_effector, plate"
+)
 PartOpt = O.opt(str, f"Skin part: {PARTS}, or a link mesh (.stl/.obj, m).")
 
 

@@ -62,8 +62,8 @@ def generate_command(
     part: Annotated[
         str | None,
         typer.Option(
-            help="Part: forearm, forearm_8mm, forearm_x2, forearm_x3, forearm_x4, end_effector, "
-            "plate, or a link mesh file .stl/.obj (metres). Default: forearm_x3."
+            help="Part: forearm_paper (default), forearm, forearm_8mm, forearm_x2, forearm_x3, "
+            "forearm_x4, end_effector, plate, or a link mesh .stl/.obj (m)."
         ),
     ] = None,
     n: Annotated[

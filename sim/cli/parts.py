@@ -53,8 +53,8 @@ def part_command(
         str,
         typer.Argument(
             metavar="NAME",
-            help="Part name: forearm, forearm_8mm, forearm_x2, forearm_x3, forearm_x4, "
-            "end_effector or plate.",
+            help="Part name: forearm_paper, forearm, forearm_8mm, forearm_x2, forearm_x3, "
+            "forearm_x4, end_effector or plate.",
         ),
     ] = DEFAULT_PART,
     mesh: Annotated[

@@ -214,8 +214,8 @@ def view_command(
     part: Annotated[
         str,
         typer.Option(
-            help="Part of a simulated sample: forearm, forearm_8mm, forearm_x2, forearm_x3, "
-            "forearm_x4, end_effector or plate."
+            help="Part of a simulated sample: forearm_paper, forearm, forearm_8mm, forearm_x2, "
+            "forearm_x3, forearm_x4, end_effector or plate."
         ),
     ] = DEFAULT_PART,
     seed: Annotated[int, typer.Option(help="Dataset seed of a simulated sample.")] = 0,

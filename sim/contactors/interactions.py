@@ -7,10 +7,16 @@ of a right hand, palm facing the skin); ``yaw`` turns the hand's x away from the
 
 Operator positions. In front of the link, the operator's forearm is roughly perpendicular to the
 link, so the fingers lie *across* it (yaw 90 deg +- the subject's habit) and a grasp wraps the
-fingers around the link's edge with the palm on a face. At the side, the operator's forearm runs
-roughly along the link: pushes and pulls are done with the fingers *along* it (yaw 0 or 180 deg)
-and a grasp comes obliquely (yaw +-45 deg), so fingers wrap the edge diagonally — a person at the
-side cannot put the fingers straight across without an extreme wrist posture.
+fingers around it with the palm on a face. At the side, the operator's forearm runs roughly
+along the link: pushes and pulls are done with the fingers *along* it (yaw 180 deg) and a grasp
+comes obliquely (yaw 135 deg), so fingers wrap the edge diagonally — a person at the side cannot
+put the fingers straight across without an extreme wrist posture. The operator stands where the
+paper's people stood (`INDEX_END`): the index finger nearer the link's base (z = 0), so a right
+hand and a left one yaw opposite ways. Measured on the real prints (../shared/data/real_hands,
+fold 1): index to little finger points along the map's columns (+-45 deg) in 71 % of prints and
+the other way in 15 %, thumb to fingers across them in 96 %; with either side drawn at random
+(and fingers turned towards more skin) the default set read 36 % and 34 % (600 hand prints, seed
+3), with the stance 70 % and 4 %. Free touches come from anywhere (fingers towards more skin).
 
 Directions (the operator's view, palm down): push away = towards the fingertips, pull = towards
 the wrist (fingers hooked), push left / right = towards the operator's left / right (the hand's
@@ -33,12 +39,15 @@ they meet it.
 
 Placement (fair between classes): the aim is drawn by `sim.contactors.placement.draw_aim_taxel`, the
 same draw the runner makes for non-hand contactors. The hand is then arranged around the aim:
-fingers towards more skin with probability `TOWARD_SKIN_P` (not off the link's end), the palm centre
-on the aim, shifted along the hand so that the MCP row lies on the edge the fingers cross
-(`wrap_shift_m`; grasps, pulls and pushes across a face), or back for fingertip touches.
-Measured over 100 hand and 100 non-hand samples (seed 7): pressure-weighted contact centroids on
-the lattice do not differ (two-sample KS p = 0.47 / 0.58 along u / v, 0.21 for the distance to
-the map's border; medians 49 / 51 mm from it).
+the palm centre on the aim, shifted along the hand so that the MCP row lies on the edge the
+fingers cross (`wrap_shift_m`; grasps, pulls and pushes across a face; at most
+`MAX_GRASP_SHIFT_M`, `BAND_MAX_SHIFT_M` on a part with an aim band), or back for fingertip
+touches. Measured on the previous default skin over 1,710 hand and 1,820 non-hand prints:
+pressure-weighted contact centroids on the lattice do not differ along u / v (two-sample KS
+p = 0.11 / 0.13). On the default skin (1,400 samples, seed 5) the hands' centroids lie 10 mm
+further around (medians -9.7 / 0.9 mm, p < 0.01) and 7 mm further along (-10.2 / -2.8, p = 0.02)
+than the non-hands': the operator stands on one side, and hands reach out from the palm. Hands
+reach nearer the map's border on both skins.
 """
 
 from __future__ import annotations
@@ -68,10 +77,19 @@ FORCE_RANGE_N = {"grasp": (16.0, 50.0), "push": (10.0, 40.0), "free": (4.0, 30.0
 SHEAR_FRACTION = (0.25, 0.6)  # shear / normal force (below the friction of skin)
 TWIST_RANGE_NM = (0.2, 0.8)
 DURATIONS_S = (0.15, 0.25, 0.3, 0.2)  # approach, load, hold, release (nominal), s
+INDEX_END = 1.0  # +1: a right hand yaws +90 deg in front (index nearer z = 0); -1: the mirror
 YAW_SD_DEG = 10.0  # trial-to-trial spread of the hand's yaw around the operator's nominal
 TILT_SD_DEG = 4.0
-TOWARD_SKIN_P = 0.85  # probability that the fingers point towards more skin (not off the end)
+TOWARD_SKIN_P = 0.85  # free touches: probability that the fingers point towards more skin
 MAX_GRASP_SHIFT_M = 0.05  # largest palm shift from the aim for a grasp, m
+# On a part with an aim band (`sim.skin.parts.Part.aim_band_mm`, the default skin) the palm moves
+# at most this far towards the edge: the skin ends a little past it, and a palm shifted 50 mm
+# there wrapped the fingers off it. Measured on the default skin (400 hand prints, seed 3; real
+# 93-96 % each): digits boxed in 63-79 % (50 mm), 66-84 % (25 mm), 65-86 % with the palm on the
+# aim; grasp force shares of the four fingers (240 grasps, seed 11; Li 2002: 32.2 / 32.6 / 23.5
+# / 11.7) 33.5 / 31.8 / 23.4 / 11.4 at 50 mm, 30.5 / 34.4 / 24.9 / 10.2 at 25 mm, 28.7 / 37.7 /
+# 24.9 / 8.7 on the aim (middle above its range), and the palm's share of a push 64, 59, 52 %.
+BAND_MAX_SHIFT_M = 0.025
 # The digits alone. In the real folds (../shared/data/real_hands) 212 of 684 hand prints (31 %)
 # have no palm box, and 83 % of those show all five digits, laid out as in whole-hand prints
 # (thumb 126 mm from the fingers, index to little finger 90 mm; with a palm 121 and 88): the
@@ -152,13 +170,16 @@ def _log_uniform(rng: np.random.Generator, lo_hi: tuple[float, float]) -> float:
     return float(np.exp(rng.uniform(np.log(lo_hi[0]), np.log(lo_hi[1]))))
 
 
-def nominal_yaw_deg(action: str, position: str, rng: np.random.Generator) -> float:
-    """Yaw of the hand (deg) by operator position (module docstring), before noise."""
-    grasping = action.startswith("grasp")
+def nominal_yaw_deg(action: str, position: str, side: str, rng: np.random.Generator) -> float:
+    """Yaw of the hand (deg) by operator position (module docstring), before noise. In front
+    and at the side the operator stands where the paper's people stood (`INDEX_END`): a right
+    hand (``side``) and a left one yaw opposite ways so that the index finger is the one nearer
+    the link's base; a free touch comes from anywhere."""
+    hand = INDEX_END if side == "right" else -INDEX_END
     if position == "front":
-        return float(rng.choice([90.0, -90.0]))
+        return 90.0 * hand
     if position == "side":
-        return float(rng.choice([45.0, -45.0, 135.0, -135.0] if grasping else [0.0, 180.0]))
+        return float(135.0 * hand if action.startswith("grasp") else 180.0)
     return float(rng.uniform(-180.0, 180.0))
 
 
@@ -212,7 +233,8 @@ def wrap_shift_m(part: Part, taxel: int, yaw_rad: float, subject: Subject) -> fl
     edge = edge_distance_m(part, pos, normal, hand_direction(part, taxel, yaw_rad), reach)
     if edge >= reach:
         return None
-    return float(np.clip(edge - mcp, -MAX_GRASP_SHIFT_M, MAX_GRASP_SHIFT_M))
+    most = MAX_GRASP_SHIFT_M if part.aim_band_mm is None else BAND_MAX_SHIFT_M
+    return float(np.clip(edge - mcp, -most, most))
 
 
 def plan_hand_interaction(
@@ -231,9 +253,12 @@ def plan_hand_interaction(
             f"{', '.join(ACTIONS)} / {', '.join(OPERATOR_POSITIONS)}"
         )
     k = draw_aim_taxel(part, rng)
-    yaw_deg = nominal_yaw_deg(action, operator_position, rng) + subject.approach_deg
+    yaw_deg = (
+        nominal_yaw_deg(action, operator_position, subject.handedness, rng) + subject.approach_deg
+    )
     yaw = float(np.deg2rad(yaw_deg + rng.normal(0.0, YAW_SD_DEG)))
-    yaw = toward_skin_yaw(part, k, yaw, subject.hand.length_m, rng)
+    if operator_position == "free":
+        yaw = toward_skin_yaw(part, k, yaw, subject.hand.length_m, rng)
     mode, standoff = action_mode(action, rng), 0.0
     if mode in PALM_CLEAR_MODES and rng.random() < PALM_CLEAR_P:
         mode, standoff = "grip", float(rng.uniform(*STANDOFF_M))

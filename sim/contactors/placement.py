@@ -2,8 +2,10 @@
 
 Policy. Every contactor (hand, object, body part) is aimed at a taxel drawn with probability
 proportional to its *coverage*: the number of taxels within `AIM_RADIUS_MM` (a hand's half
-length) on the part's flat lattice. Operators and objects touch the skin, not the bare link, and
-a classifier must not learn the class from *where* the contact is: the same draw serves both
+length) on the part's flat lattice; on a part with an aim band (the default skin, where the
+paper's people grasped the top face's middle: `sim.skin.parts.PAPER_AIM_BAND_MM`) only there.
+Operators and objects touch the skin, not the bare link, and a classifier must not learn the
+class from *where* the contact is: the same draw serves both
 classes (non-hand plans leave ``site_uv`` None and the runner draws with `draw_aim_taxel`; hand
 plans draw the same way and arrange the hand around the aim, `sim.contactors.interactions`).
 
@@ -36,9 +38,20 @@ def coverage(part: Part) -> np.ndarray:
     return np.array([len(n) for n in tree.query_ball_point(part.flat_mm, AIM_RADIUS_MM)], float)
 
 
-def draw_aim_taxel(part: Part, rng: np.random.Generator) -> int:
-    """A taxel drawn with probability proportional to `coverage` (the shared placement policy)."""
+def aim_weights(part: Part) -> np.ndarray:
+    """(N,) float: `coverage`, zero outside the part's aim band (``Part.aim_band_mm``: the taxels
+    within that distance of the middle of the skin's first flat coordinate, around a tube)."""
     w = coverage(part)
+    if part.aim_band_mm is None:
+        return w
+    a = part.flat_mm[:, 0]
+    return w * (np.abs(a - 0.5 * (a.min() + a.max())) <= part.aim_band_mm)
+
+
+def draw_aim_taxel(part: Part, rng: np.random.Generator) -> int:
+    """A taxel drawn with probability proportional to `aim_weights` (the shared placement
+    policy)."""
+    w = aim_weights(part)
     return int(rng.choice(part.n_taxels, p=w / w.sum()))
 
 

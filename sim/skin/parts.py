@@ -111,6 +111,25 @@ def finer_forearm_tiling(n_rows: int) -> Tiling:
 
 FOREARM_REGION = TubeRegion((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), center_m=0.16)
 
+# The paper's skin region (the default skin): the top face of the forearm and its two edges, longer
+# along the link than around it. Measured on the real prints (../shared/data/real_hands): the
+# paper's 247 x 362 px map is 182 mm around x 266 mm along at 0.735 mm a pixel (its columns run
+# along the link: index to little finger lie along the columns in 77 % of prints, thumb to
+# fingers along the rows in 60 %, as in a grasp across the link), and the union of all 684
+# prints' contact covers every row, so the skin ends where wrapping fingers run off it (54 % of
+# prints reach the bottom row). forearm_x3's modules (5.9 mm pads) on 10 rows along x 11 columns
+# around: pads span 254 mm along x 180 mm around, 1,320 taxels.
+_X3 = finer_forearm_tiling(9)
+PAPER_TILING = Tiling(10, 11, _X3.col_pitch_mm, _X3.row_pitch_mm, _X3.pitch_mm)
+# Where the paper's people touched it: each of the five digits is boxed in 93-96 % of the real
+# prints. Aimed anywhere on this skin, the MCP row shifted onto the edge the fingers cross, a
+# digit showed in 56-69 % of hand prints (600 prints, seed 3): the fingers wrapped off the skin
+# onto the bare side; aimed within 30 mm of the top face's middle, the palm shifted at most 25 mm
+# (`sim.contactors.interactions.BAND_MAX_SHIFT_M`), in 66-84 % (400 prints; parts boxed, median:
+# 4 -> 5, real 6 [5, 6]).
+PAPER_AIM_BAND_MM = 30.0
+PAPER_REGION = TubeRegion((0.0, 0.0, 0.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), center_m=0.145)
+
 # The gripper body: flat faces, 15 mm edge radius; two bands of 7 modules wrap its front and the
 # two rounded front edges onto the sides (the back face and the top stay bare).
 END_EFFECTOR_SIZE_M = (0.10, 0.08, 0.12)
@@ -140,6 +159,7 @@ class Part:
     sensor_faces: np.ndarray
     flat_mm: np.ndarray
     description: str = ""
+    aim_band_mm: float | None = None
 
     @property
     def n_taxels(self) -> int:
@@ -152,11 +172,12 @@ def make_part(
     region: TubeRegion | PlaneRegion,
     tiling: Tiling,
     description: str = "",
+    aim_band_mm: float | None = None,
 ) -> Part:
     """Tile `tiling` over `region` of `link` and triangulate the taxels into the sensor mesh."""
     layout, flat = tile(link, region, tiling, name=name)
     faces = np.asarray(triangulate(layout.positions_m, layout.normals).faces, dtype=np.int64)
-    return Part(name, link, layout, faces, flat, description)
+    return Part(name, link, layout, faces, flat, description, aim_band_mm)
 
 
 def forearm() -> Part:
@@ -194,6 +215,20 @@ def finer_forearm(n_rows: int, name: str) -> Part:
     )
 
 
+def forearm_paper() -> Part:
+    """The paper's skin region: 110 modules at 5.9 mm pad pitch over the forearm's top face and
+    edges (`PAPER_TILING`), 182 mm around x 260 mm along: the default skin."""
+    return make_part(
+        "forearm_paper",
+        geometry.forearm_mesh(),
+        PAPER_REGION,
+        PAPER_TILING,
+        "procedural Baxter-style upper forearm, the paper's skin region: 110 modules x 12 pads "
+        "at 5.9 mm pitch on its top face and edges",
+        aim_band_mm=PAPER_AIM_BAND_MM,
+    )
+
+
 def end_effector() -> Part:
     """Gripper body (rounded box) with 14 modules over its front and front edges."""
     mesh = geometry.rounded_box_mesh(END_EFFECTOR_SIZE_M, END_EFFECTOR_EDGE_M)
@@ -218,6 +253,7 @@ def plate() -> Part:
 
 
 PARTS: dict[str, Callable[[], Part]] = {
+    "forearm_paper": forearm_paper,
     "forearm": forearm,
     "forearm_8mm": forearm_8mm,
     "forearm_x2": lambda: finer_forearm(7, "forearm_x2"),

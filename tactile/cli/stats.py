@@ -258,10 +258,11 @@ def shape_report(
             q = quartiles(s.values[key])
             cells.append(f"{name} {'n/a' if q is None else fmt.format(q[1])}")
         typer.echo(f"{label}, median: " + "; ".join(cells))
-    typer.echo(
-        f"{CHIRALITY['thumb_right']}, share: "
-        + "; ".join(f"{name} {chirality(s):.2f}" for name, s in sets.items())
-    )
+    for key, label in CHIRALITY.items():
+        typer.echo(
+            f"{label}, share: "
+            + "; ".join(f"{name} {chirality(s, key):.2f}" for name, s in sets.items())
+        )
     typer.echo(
         f"{WITHOUT_PALM}, share: "
         + "; ".join(f"{name} {without_palm(s):.2f}" for name, s in sets.items())

@@ -73,3 +73,21 @@ def test_the_default_skin_marks_a_single_pad_as_a_real_pad() -> None:
         p[k] = 1.0
         areas.append(int((tmap.image(p) > 4).sum()))
     assert 250 <= np.median(areas) <= 300, np.median(areas)
+
+
+def test_the_default_skin_draws_the_papers_map() -> None:
+    """The paper's map, 247 x 362 px, is 182 mm around x 266 mm along at `MAP_STEP_MM` (its
+    columns along the link: docs/stats.md). The default skin's map has that frame within 4 %
+    each way, its pads at forearm_x3's pitch, and its columns run along the link axis (+z):
+    a pixel column step moves the taxels along z only."""
+    part = get_part(DEFAULT_PART)
+    tmap = TactileMap.build(part.layout, step_mm=MAP_STEP_MM)
+    np.testing.assert_allclose(tmap.shape, (247, 362), rtol=0.04)
+    pads = part.layout.positions_m[~np.isin(part.layout.channel_ids % 12, (6, 10))] * 1e3
+    d, _ = cKDTree(pads).query(pads, 2)
+    assert np.median(d[:, 1]) == pytest.approx(SKIN_PITCH_MM * 5 / 9, rel=0.03)
+    uv = np.asarray(tmap.vertex_uv_mm)
+    xyz = part.layout.positions_m[np.asarray(tmap.vertex_taxel)]
+    coef, *_ = np.linalg.lstsq(np.column_stack([uv, np.ones(len(uv))]), xyz, rcond=None)
+    along_u = coef[0] / np.linalg.norm(coef[0])  # d(position)/du: the column direction
+    assert abs(along_u[2]) > 0.99

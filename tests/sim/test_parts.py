@@ -106,7 +106,10 @@ def test_polar_contour_of_a_square() -> None:
 
 
 def test_unknown_part_lists_the_known_ones() -> None:
-    known = "forearm, forearm_8mm, forearm_x2, forearm_x3, forearm_x4, end_effector, plate"
+    known = (
+        "forearm_paper, forearm, forearm_8mm, forearm_x2, forearm_x3, forearm_x4, end_effector, "
+        "plate"
+    )
     with pytest.raises(KeyError, match=f"known parts: {known}"):
         get_part("foream")
 

@@ -13,7 +13,7 @@ from sim.contactors.spec import PressPlan
 from sim.contactors.subjects import sample_subjects
 from sim.episode.runner import EpisodeConfig, EpisodeContext, site_pose
 from sim.skin.geometry import ForearmShape, forearm_profile, superellipse
-from sim.skin.parts import get_part
+from sim.skin.parts import PAPER_AIM_BAND_MM, get_part
 
 
 @pytest.fixture(scope="module")
@@ -34,6 +34,21 @@ def test_aims_are_drawn_in_proportion_to_coverage(forearm):
     low = w < np.median(w)
     expected = w[low].sum() / w.sum()
     assert np.mean(low[draws]) == pytest.approx(expected, abs=0.015)
+
+
+def test_an_aim_band_keeps_every_aim_inside_it():
+    """The default skin aims within `PAPER_AIM_BAND_MM` of the middle of its around coordinate
+    (closed form on the flat lattice), in proportion to coverage there."""
+    part = get_part("forearm_paper")
+    a = part.flat_mm[:, 0]
+    inside = np.abs(a - 0.5 * (a.min() + a.max())) <= PAPER_AIM_BAND_MM
+    assert 0.2 < inside.mean() < 0.5
+    rng = np.random.default_rng(0)
+    draws = np.array([placement.draw_aim_taxel(part, rng) for _ in range(20000)])
+    assert inside[draws].all()
+    w = placement.coverage(part) * inside
+    low = inside & (w < np.median(w[inside]))
+    assert np.mean(low[draws]) == pytest.approx(w[low].sum() / w.sum(), abs=0.015)
 
 
 def test_hands_and_non_hands_aim_with_the_same_draw(forearm):

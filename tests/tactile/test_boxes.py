@@ -161,6 +161,11 @@ def test_part_layout_measured_by_hand():
     up = boxes.copy()
     up[:, 1:3] = 80 - up[:, 2:0:-1]  # mirrored top to bottom: fingers up, thumb still right
     assert part_layout(up)["thumb_right"] == 1.0
+    assert d["little_along"] == 0.0  # index to little runs down the rows
+    across = boxes.copy()
+    across[:, 1:5] = boxes[:, [3, 4, 1, 2]]  # transposed: index to little along +columns
+    assert part_layout(across)["little_along"] == 1.0
+    assert part_layout(across[:, [0, 1, 2, 4, 3]] * [1, 1, 1, -1, -1])["little_along"] == 0.0
     alone = part_layout(boxes[:1])
     assert all(np.isnan(v) for v in alone.values())
 
