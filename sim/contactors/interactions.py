@@ -15,7 +15,7 @@ paper's people stood (`INDEX_END`): the index finger nearer the link's base (z =
 hand and a left one yaw opposite ways. Measured on the real prints (../shared/data/real_hands,
 fold 1): index to little finger points along the map's columns (+-45 deg) in 71 % of prints and
 the other way in 15 %, thumb to fingers across them in 96 %; with either side drawn at random
-(and fingers turned towards more skin) the default set read 36 % and 34 % (600 hand prints, seed
+(and fingers turned towards more skin) the default set read 34 % and 34 % (600 hand prints, seed
 3), with the stance 70 % and 4 %. Free touches come from anywhere (fingers towards more skin).
 
 Directions (the operator's view, palm down): push away = towards the fingertips, pull = towards
