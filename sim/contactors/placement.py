@@ -2,8 +2,9 @@
 
 Policy. Every contactor (hand, object, body part) is aimed at a taxel drawn with probability
 proportional to its *coverage*: the number of taxels within `AIM_RADIUS_MM` (a hand's half
-length) on the part's flat lattice; on a part with an aim band (the default skin, where the
-paper's people grasped the top face's middle: `sim.skin.parts.PAPER_AIM_BAND_MM`) only there.
+length) on the part's flat lattice; on a part with aim bands (the default skin, where the
+paper's people grasped the top face's middle at one place along the link:
+`sim.skin.parts.PAPER_AIM_BAND_MM`, `PAPER_AIM_ALONG_MM`) only there.
 Operators and objects touch the skin, not the bare link, and a classifier must not learn the
 class from *where* the contact is: the same draw serves both
 classes (non-hand plans leave ``site_uv`` None and the runner draws with `draw_aim_taxel`; hand
@@ -39,13 +40,15 @@ def coverage(part: Part) -> np.ndarray:
 
 
 def aim_weights(part: Part) -> np.ndarray:
-    """(N,) float: `coverage`, zero outside the part's aim band (``Part.aim_band_mm``: the taxels
-    within that distance of the middle of the skin's first flat coordinate, around a tube)."""
+    """(N,) float: `coverage`, zero outside the part's aim bands (``Part.aim_band_mm``: the taxels
+    within that distance of the middle of the skin's first flat coordinate, around a tube;
+    ``Part.aim_along_mm``: of its second, along the link)."""
     w = coverage(part)
-    if part.aim_band_mm is None:
-        return w
-    a = part.flat_mm[:, 0]
-    return w * (np.abs(a - 0.5 * (a.min() + a.max())) <= part.aim_band_mm)
+    for k, band in enumerate((part.aim_band_mm, part.aim_along_mm)):
+        if band is not None:
+            a = part.flat_mm[:, k]
+            w = w * (np.abs(a - 0.5 * (a.min() + a.max())) <= band)
+    return w
 
 
 def draw_aim_taxel(part: Part, rng: np.random.Generator) -> int:

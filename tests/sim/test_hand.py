@@ -11,6 +11,7 @@ import pytest
 
 from sim.contactors.hand import (
     HAND_PARTS,
+    METACARPAL_SHAFT,
     TISSUE_RATIO,
     HandConfig,
     apply_pose,
@@ -125,7 +126,8 @@ def measured_lengths(model, data, p: str, digit: str) -> list[float | None]:
         meta = np.linalg.norm(pos("thumb_proximal") - pos("thumb_metacarpal"))
         prox = np.linalg.norm(pos("thumb_distal") - pos("thumb_proximal"))
         return [meta, prox, None, np.linalg.norm(tip - pos("thumb_distal"))]
-    meta = 2 * model.geom_size[model.geom(f"{p}palm_{digit}_metacarpal").id, 1]
+    head = 2 * model.geom_size[model.geom(f"{p}palm_{digit}_metacarpal").id, 1]
+    meta = head / (1.0 - METACARPAL_SHAFT)  # the capsule covers the head end of the bone
     prox = np.linalg.norm(pos(f"{digit}_middle") - pos(f"{digit}_proximal"))
     mid = np.linalg.norm(pos(f"{digit}_distal") - pos(f"{digit}_middle"))
     return [meta, prox, mid, np.linalg.norm(tip - pos(f"{digit}_distal"))]

@@ -13,7 +13,7 @@ from sim.contactors.spec import PressPlan
 from sim.contactors.subjects import sample_subjects
 from sim.episode.runner import EpisodeConfig, EpisodeContext, site_pose
 from sim.skin.geometry import ForearmShape, forearm_profile, superellipse
-from sim.skin.parts import PAPER_AIM_BAND_MM, get_part
+from sim.skin.parts import PAPER_AIM_ALONG_MM, PAPER_AIM_BAND_MM, get_part
 
 
 @pytest.fixture(scope="module")
@@ -38,11 +38,14 @@ def test_aims_are_drawn_in_proportion_to_coverage(forearm):
 
 def test_an_aim_band_keeps_every_aim_inside_it():
     """The default skin aims within `PAPER_AIM_BAND_MM` of the middle of its around coordinate
-    (closed form on the flat lattice), in proportion to coverage there."""
+    and `PAPER_AIM_ALONG_MM` of the middle along the link (closed form on the flat lattice), in
+    proportion to coverage there."""
     part = get_part("forearm_paper")
-    a = part.flat_mm[:, 0]
-    inside = np.abs(a - 0.5 * (a.min() + a.max())) <= PAPER_AIM_BAND_MM
-    assert 0.2 < inside.mean() < 0.5
+    a, b = part.flat_mm[:, 0], part.flat_mm[:, 1]
+    around = np.abs(a - 0.5 * (a.min() + a.max())) <= PAPER_AIM_BAND_MM
+    along = np.abs(b - 0.5 * (b.min() + b.max())) <= PAPER_AIM_ALONG_MM
+    inside = around & along
+    assert 0.2 < around.mean() < 0.5 and 0.1 < along.mean() < 0.3
     rng = np.random.default_rng(0)
     draws = np.array([placement.draw_aim_taxel(part, rng) for _ in range(20000)])
     assert inside[draws].all()
