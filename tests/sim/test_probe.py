@@ -79,13 +79,17 @@ def test_calibration_saturates_and_grows_monotonically() -> None:
     forces = np.linspace(0.0, 40.0, 9)
     probe, taxel = Probe("sphere", (0.02,)), central_taxel(part)
     linear = calibration_curve(part, probe, forces, taxel, SkinConfig(saturation_pa=0.0))
-    assert np.all(np.diff(linear["summed_signal_counts"]) > 0)
+    # a taxel clipped at full scale holds its reading until the contact reaches the next ring of
+    # pads (8 mm pitch; the 2 mm spread does not reach it): the sum never falls
+    assert np.all(np.diff(linear["summed_signal_counts"]) >= 0)
     assert np.all(np.diff(linear["active"]) >= 0)
     assert linear["saturated"][0] == 0 and linear["saturated"][-1] > 0  # the ADC's full scale
     # the default pads level off before the converter does: the same presses read less, the
     # hardest under half as much, and no taxel reaches 65535
     pads = calibration_curve(part, probe, forces, taxel)
-    assert np.all(np.diff(pads["summed_signal_counts"]) > 0) and not pads["saturated"].any()
+    summed = pads["summed_signal_counts"]  # one pad levels off until the next ring is reached
+    assert np.all(np.diff(summed) >= 0) and summed[-1] > 5 * summed[1]
+    assert not pads["saturated"].any()
     assert np.all(pads["summed_signal_counts"][1:] < linear["summed_signal_counts"][1:])
     assert pads["summed_signal_counts"][-1] < 0.5 * linear["summed_signal_counts"][-1]
 

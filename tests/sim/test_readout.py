@@ -79,7 +79,7 @@ def test_symmetric_indentation_gives_a_symmetric_frame() -> None:
     press(scene, "b", 2e-3)
     skin = SkinInstance.create(
         part.layout.positions_m,
-        SkinConfig(gain_spread=0.0, baseline_spread_counts=0.0),
+        SkinConfig(gain_spread=0.0, baseline_spread_counts=0.0, spread_sigma_m=3e-3),
         np.random.default_rng(0),
     )
     pressure = skin.frame(scene.taxel_depth_m(), rng=None).pressure_pa
