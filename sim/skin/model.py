@@ -54,8 +54,8 @@ class SkinConfig:
     # (default skin, 5.9 mm pitch, seed 1) and of real fold 1 / fold 2 (../shared/data/real_hands)
     # 0.107 / 0.101 at 0, 0.098 / 0.087 at 1.5, 0.090 / 0.088 at 2, 0.105 / 0.111 at 2.5,
     # 0.152 / 0.169 at 3 mm (sqrt(h² + r_pad²) for the 2 mm dielectric and 1.75 mm pads): at 3 mm
-    # a neighbour 5.9 mm away took 14 % of a pad's load and fingers' marks fused (blobs 31 x 33 ->
-    # 35 x 37 mm; real 25 x 24). At 2 mm it takes 1.3 %; at the 8 mm pitch 0.03 %.
+    # a neighbour 5.9 mm away took 14 % of a pad's load and fingers' marks fused (a finger's box
+    # 33-35 x 33 mm, at 2 mm 29-32 x 29; real 25-26 x 23-24). At 2 mm it takes 1.3 %; 8 mm: 0.03 %.
     spread_sigma_m: float = 2.0e-3
     # Kernel truncation radius in sigmas.
     spread_cutoff_sigmas: float = 3.0

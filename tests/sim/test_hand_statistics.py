@@ -20,7 +20,7 @@ from sim.contactors.spec import ACTIONS
 from sim.contactors.subjects import sample_subjects
 from sim.episode.runner import EpisodeContext
 from sim.generate.hands import sample_hand
-from tactile.dataset.boxes import BoxFolder, box_labels
+from tactile.dataset.boxes import CONTACT_LEVEL, BoxFolder, box_labels
 from tactile.prints.shapes import MIN_BLOB_PX, boxes_of_labels, contact_blobs, part_layout
 
 N_SAMPLES, SEED = 320, 2020
@@ -40,6 +40,30 @@ def stats() -> dict:
         rejects.update(rej)
         rows.append(sample)
     return {"samples": rows, "rejects": rejects, "active_pa": ctx.cfg.active_pa, "tmap": ctx.tmap}
+
+
+def real_folds(shared_data) -> list:
+    """The real hand prints of both folds, native frame (skip without them)."""
+    prints = []
+    for fold in ("fold1", "fold2"):
+        path = shared_data / "real_hands" / fold
+        if not path.is_dir():
+            pytest.skip(f"real hand prints not found at {path}")
+        folder = BoxFolder.open(path, NAMES, frame_px=PAPER_FRAME_PX)
+        prints += [folder[i] for i in range(len(folder))]
+    return prints
+
+
+def marks(image: np.ndarray, boxes: np.ndarray) -> tuple[list[int], int | None]:
+    """The areas (px) of a print's blobs and how many of them hold at least `MIN_BLOB_PX` of the
+    palm's box-derived pixels (None without a palm box)."""
+    blobs = contact_blobs(image, CONTACT_LEVEL, MIN_BLOB_PX)
+    areas = np.bincount(blobs.ravel())[1:].tolist()
+    if PALM not in boxes[:, 0]:
+        return areas, None
+    palm = (box_labels(image, boxes) == PALM) & (blobs > 0)
+    per_blob = np.bincount(blobs[palm], minlength=blobs.max() + 1)
+    return areas, int((per_blob >= MIN_BLOB_PX).sum())
 
 
 def test_every_action_and_both_operator_positions_occur(stats):
@@ -114,13 +138,7 @@ def test_index_to_little_finger_runs_along_the_columns_as_in_the_real_folds(stat
     ``INDEX_END``): in the real folds index to little finger points along +columns (+-45 deg) in
     71 % of prints; the generated prints as often, within 3 binomial sd (with the operator's side
     drawn at random: 34 %)."""
-    real = []
-    for fold in ("fold1", "fold2"):
-        path = shared_data / "real_hands" / fold
-        if not path.is_dir():
-            pytest.skip(f"real hand prints not found at {path}")
-        folder = BoxFolder.open(path, NAMES, frame_px=PAPER_FRAME_PX)  # the native frame
-        real += [part_layout(folder[i].boxes)["little_along"] for i in range(len(folder))]
+    real = [part_layout(p.boxes)["little_along"] for p in real_folds(shared_data)]
     sim = [
         part_layout(boxes_of_labels(s["label_image"], s["image"]))["little_along"]
         for s in stats["samples"]
@@ -130,30 +148,6 @@ def test_index_to_little_finger_runs_along_the_columns_as_in_the_real_folds(stat
     p = real.mean()
     sd = np.sqrt(p * (1 - p) * (1 / len(real) + 1 / len(sim)))
     assert abs(sim.mean() - p) < 3 * sd, f"{sim.mean():.3f} of {len(sim)} vs real {p:.3f}"
-
-
-def real_folds(shared_data) -> list:
-    """The real hand prints of both folds, native frame (skip without them)."""
-    prints = []
-    for fold in ("fold1", "fold2"):
-        path = shared_data / "real_hands" / fold
-        if not path.is_dir():
-            pytest.skip(f"real hand prints not found at {path}")
-        folder = BoxFolder.open(path, NAMES, frame_px=PAPER_FRAME_PX)
-        prints += [folder[i] for i in range(len(folder))]
-    return prints
-
-
-def marks(image: np.ndarray, boxes: np.ndarray) -> tuple[list[int], int | None]:
-    """The areas (px) of a print's blobs and how many of them hold at least `MIN_BLOB_PX` of the
-    palm's box-derived pixels (None without a palm box)."""
-    blobs = contact_blobs(image, 4, MIN_BLOB_PX)
-    areas = np.bincount(blobs.ravel())[1:].tolist()
-    if PALM not in boxes[:, 0]:
-        return areas, None
-    palm = (box_labels(image, boxes) == PALM) & (blobs > 0)
-    per_blob = np.bincount(blobs[palm], minlength=blobs.max() + 1)
-    return areas, int((per_blob >= MIN_BLOB_PX).sum())
 
 
 def test_palms_break_into_pads_as_often_as_in_the_real_folds(stats, shared_data):
