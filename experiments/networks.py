@@ -117,7 +117,7 @@ def resolve_model(arch: str, data, models_dir, checkpoint, plan, seed: int, prog
     def make_data() -> Data:
         return split_data(data, run, plan.samples(arch), seed, progress)[0]
 
-    return train_once(out, run, make_data, progress=progress)[0]
+    return train_once(out, run, make_data, progress=progress, data=data)[0]
 
 
 def check_checkpoint(path: Path | None, task: str) -> None:

@@ -26,7 +26,7 @@ from learn.data.folder import HAND_NAMES, FolderDataset
 from learn.data.sequences import SequenceDataset
 from learn.inputs import mirror_classes
 from tactile.dataset.boxes import is_box_folder
-from tactile.dataset.reader import DATASET, DatasetReader
+from tactile.dataset.reader import DATASET, DatasetReader, open_dataset
 from tactile.dataset.splits import split_indices
 from tactile.errors import ConfigError, DataError
 from tactile.images.labels import CLASS_NAMES
@@ -102,6 +102,16 @@ def is_dataset(path: str | Path) -> bool:
     return (path / DATASET).is_file() or (path.is_file() and path.suffix == ".h5")
 
 
+def fingerprint(path: str | Path) -> str | None:
+    """The fingerprint of the handskin dataset at ``path`` (what it was generated from:
+    `tactile.dataset.manifest`), None for an image or box folder or a dataset without one."""
+    if not is_dataset(path):
+        return None
+    with open_dataset(path) as ds:
+        value = ds.attrs.get("fingerprint")
+    return None if value is None else str(value)
+
+
 def group_ids(ds: Dataset) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
     """(class, subject_id, instance_id) per sample of ``ds`` (None where unknown)."""
     if isinstance(ds, FolderDataset | BoxFolderDataset):
@@ -175,6 +185,7 @@ def load_data(
     desc = {
         "path": str(path),
         "kind": "dataset" if is_dataset(path) else "folder",
+        "fingerprint": fingerprint(path),
         "hand_classes": None if hand_classes is None else list(hand_classes),
         "n_train": len(train_ds),
         "n_val": _len(val_ds),

@@ -94,4 +94,5 @@ def pretrain_encoder(run, data: str | Path, out: Path, progress: bool = True) ->
         vgg,
         lambda: load_data(data, vgg, with_test=False, progress=progress),
         progress=progress,
+        data=data,
     )[0]

@@ -17,7 +17,7 @@ from learn.config import preset_run
 from learn.data.load import load_data
 from learn.train.checkpoint import BEST, LAST, check_inputs, load_checkpoint, run_of
 from learn.train.loop import fit
-from learn.train.state import patience_out
+from learn.train.state import check_same_data, patience_out
 from tactile.errors import ConfigError, DataError
 
 
@@ -56,6 +56,7 @@ def ensure_model(
         run,
         lambda: load_data(data, run, with_test=False, progress=progress),
         progress=progress,
+        data=data,
     )[0]
 
 
@@ -76,16 +77,21 @@ def train_once(
     *,
     init: str | Path | None = None,
     progress: bool = True,
+    data: str | Path | None = None,
 ) -> tuple[Path, bool]:
     """(``out/best.pt``, whether this call trained) for ``run`` trained into ``out``.
 
     A finished run there is reused (and said so); a stopped one (killed, or paused mid-schedule)
     resumes from its ``last.pt``, so a long experiment interrupted mid-training neither restarts
     that model nor takes its half-trained weights as done; else ``make_data()`` is trained on.
-    ConfigError, before any work, when ``out`` holds a run of another configuration.
+    ConfigError, before any work, when ``out`` holds a run of another configuration, or of the
+    dataset at ``data`` (its path) before it was regenerated with other settings.
     """
     last, best = out / LAST, out / BEST
-    check_reusable(last if last.is_file() else best, run)
+    held = last if last.is_file() else best
+    check_reusable(held, run)
+    if held.is_file():
+        check_same_data(load_checkpoint(held), data, f"{held}")
     if best.is_file() and (not last.is_file() or finished(out, run)):
         print(f"reusing {best}")
         return best, False

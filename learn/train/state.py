@@ -15,7 +15,7 @@ import torch
 from torch import nn
 
 from learn.config import RunConfig
-from learn.data.load import Data
+from learn.data.load import Data, fingerprint
 from learn.train.checkpoint import (
     BEST,
     LAST,
@@ -181,4 +181,20 @@ def check_run_folder(out: Path, resume: bool, data: Path) -> None:
         raise ConfigError(
             f"--resume: the run in {out} trains on {theirs}, not {data}. Fix: resume it on "
             f"{theirs}, or start a run on {data} in another --out"
+        )
+    check_same_data(held, data, f"--resume: the run in {out}")
+
+
+def check_same_data(held: dict, data: str | Path | None, who: str) -> None:
+    """Refuse a run (checkpoint dict ``held``) trained on a dataset at ``data``'s path whose
+    fingerprint has changed since: regenerated there with other settings, its images are not
+    the ones the run learnt from. Runs of folders, or of datasets older than fingerprints, pass."""
+    theirs = (held.get("data") or {}).get("fingerprint")
+    now = None if data is None else fingerprint(data)
+    if theirs is not None and now is not None and theirs != now:
+        raise ConfigError(
+            f"{who} trained on {data} as it was generated then (fingerprint {theirs[:12]}); the "
+            f"dataset there now is another (fingerprint {now[:12]}), so going on would mix two "
+            "datasets in one network. Fix: train afresh in another --out (or --models) folder, "
+            "or move that run away"
         )

@@ -259,6 +259,30 @@ def test_a_run_folder_is_never_written_over(app, tiny_dataset, tiny_writer, smal
     assert _digest(run2) == before
 
 
+def test_resume_refuses_a_dataset_regenerated_at_the_same_path(
+    app, tiny_writer, small_config, tmp_path
+):
+    """A stopped run, its dataset generated again at the same path with other settings (another
+    fingerprint): --resume is refused naming both fingerprints, the run folder unchanged."""
+    import shutil
+
+    from learn.data.load import fingerprint
+
+    data, run = tmp_path / "data", tmp_path / "run"
+    tiny_writer(data, list(range(48)))
+    first = fingerprint(data)
+    base = ["train", str(data), "--config", str(small_config), "--out", str(run), "--no-progress"]
+    res = runner.invoke(app, [*base, "--stop-after-epoch", "1"])
+    assert res.exit_code == 0, res.output
+    before = _digest(run)
+    shutil.rmtree(data)
+    tiny_writer(data, list(range(48)), split="greedy")  # the same samples, another manifest
+    assert fingerprint(data) != first
+    res = runner.invoke(app, [*base, "--resume"])
+    assert res.exit_code == 2 and first[:12] in res.output and fingerprint(data)[:12] in res.output
+    assert "another --out" in res.output and _digest(run) == before
+
+
 def test_one_class_training_data_is_refused(app, tiny_writer, small_config, tmp_path):
     only_objects = tiny_writer(tmp_path / "objects", list(range(24, 48)))
     out = tmp_path / "run"

@@ -24,6 +24,21 @@ def test_reuse_needs_the_same_configuration(tiny_dataset, tmp_path):
     assert first.stat().st_mtime_ns == stamp  # nothing written over
 
 
+def test_a_model_of_a_regenerated_dataset_is_not_reused(tiny_writer, tmp_path):
+    """A finished model is not reused once its dataset was generated again at the same path with
+    other settings (another fingerprint): refused before any work, the model left as it was."""
+    import shutil
+
+    data = tiny_writer(tmp_path / "data", list(range(48)))
+    first = ensure_model("handsnet", data, tmp_path / "models", epochs=1, progress=False)
+    stamp = first.stat().st_mtime_ns
+    shutil.rmtree(data)
+    tiny_writer(data, list(range(48)), split="greedy")
+    with pytest.raises(ConfigError, match=r"fingerprint.*another --out"):
+        ensure_model("handsnet", data, tmp_path / "models", epochs=1, progress=False)
+    assert first.stat().st_mtime_ns == stamp
+
+
 def test_a_stopped_run_resumes_instead_of_being_reused(tiny_dataset, tmp_path):
     """A model whose training was cut short (here paused after epoch 1 of 2; a killed run
     leaves the same files) is continued to the end, and ends as an uninterrupted run does."""

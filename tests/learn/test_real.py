@@ -6,6 +6,7 @@ drawn with known boxes; expected scores counted by hand or by a slow per-pixel l
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ import torch
 from PIL import Image
 from typer.testing import CliRunner
 
-from experiments.real_finetune import FinetunePlan, run_finetune, subset
+from experiments.real_finetune import FinetunePlan, run_finetune, subset, with_replay
 from handskin.cli import app
 from learn.data.boxes import BoxFolderDataset
 from learn.evaluate.real import evaluate_real, localise
@@ -21,6 +22,7 @@ from learn.infer.predict import load_predictor, predict_image
 from learn.train.losses import SegmentationLoss, class_weights
 from tactile.dataset import open_dataset
 from tactile.dataset.boxes import BoxFolder, box_labels
+from tactile.errors import ConfigError, DataError
 from tactile.images.labels import CLASS_NAMES, IGNORE
 from tactile.prints.shapes import boxes_of_labels
 
@@ -159,11 +161,39 @@ def test_subsets_are_nested_per_draw_and_shared_by_the_starts():
     assert np.array_equal(a, subset(342, 10, 0, 0)) and len(subset(342, 342, 0, 0)) == 342
 
 
-def test_finetune_experiment_runs_resumes_and_charts(real_like, checkpoints, tmp_path):
+def test_replay_repeats_the_real_prints_to_as_many_as_the_simulated():
+    from learn.data.load import TensorData
+
+    real = TensorData(torch.zeros(3, 1, 4, 5), torch.ones(3, 4, 5, dtype=torch.int64))
+    sim = TensorData(torch.ones(10, 1, 4, 5), torch.zeros(10, 4, 5, dtype=torch.int64))
+    x, y = with_replay(real, sim)
+    assert x.shape == (10 + 9, 1, 4, 5) and y.shape == (19, 4, 5)  # 10 // 3 = 3 copies of 3
+    assert int((x[:, 0, 0, 0] == 0).sum()) == 9 and bool((y[:10] == 0).all())
+    big = TensorData(torch.zeros(12, 1, 4, 5), torch.ones(12, 4, 5, dtype=torch.int64))
+    assert len(with_replay(big, sim)[1]) == 22  # more real than simulated: each once
+    assert with_replay(real, None)[0] is real.x
+
+
+def test_finetune_refuses_a_replay_source_before_any_work(real_like, checkpoints, tmp_path):
+    train_path, test_path, _, _ = real_like
+    plan = FinetunePlan(ks=(2,), draws=(1,), steps=1, threads=1, replay=2)
+    out = tmp_path / "ft"
+    with pytest.raises(DataError, match="--replay-from"):
+        run_finetune(checkpoints["segnet"], train_path, test_path, out, plan, False, train_path)
+    with pytest.raises(ConfigError, match="--replay 100000"):
+        big = FinetunePlan(ks=(2,), draws=(1,), steps=1, threads=1, replay=100_000)
+        run_finetune(checkpoints["segnet"], train_path, test_path, out, big, progress=False)
+    assert not out.exists()
+
+
+def test_finetune_experiment_runs_resumes_and_charts(
+    real_like, checkpoints, tiny_dataset, tmp_path
+):
     train_path, test_path, train, _ = real_like
-    plan = FinetunePlan(ks=(2, len(train)), draws=(2, 1), steps=2, threads=1)
+    plan = FinetunePlan(ks=(2, len(train)), draws=(2, 1), steps=2, threads=1, replay=3)
     out = tmp_path / "ft"
     done = run_finetune(checkpoints["segnet"], train_path, test_path, out, plan, progress=False)
+    assert Path(done["key"]["replay_from"]).resolve() == Path(tiny_dataset).resolve()
     runs = done["runs"]
     assert len(runs) == 2 * (2 + 1)
     for k, draw in ((2, 0), (2, 1), (len(train), 0)):
