@@ -21,7 +21,14 @@ from experiments.frames import KEY_SUBSET, Frames, load_frames, stream
 from experiments.options import check_dataset, check_out
 from experiments.report import Report
 from learn.config import TASK_OF_ARCH, preset_run
-from learn.data.load import Data, materialize, open_split, subset, validation_split
+from learn.data.load import (
+    Data,
+    fingerprint,
+    materialize,
+    open_split,
+    subset,
+    validation_split,
+)
 from learn.evaluate.report import ARCH_LABEL
 from learn.inputs import input_canvas, unpressed_as_background
 from learn.models import prepare_for_inference
@@ -100,7 +107,8 @@ def split_data(path, run, n_train: int | None, seed: int, progress: bool = True)
         if val is not None and len(val.indices) > n_val:
             val = subset(val, np.sort(rng.choice(len(val.indices), n_val, False)))
     names = ("non_hand", "hand") if run.task == "classify" else CLASS_NAMES
-    desc = {"path": str(path), "kind": "dataset", "n_train": len(train)}
+    desc = {"path": str(path), "kind": "dataset", "fingerprint": fingerprint(path)}
+    desc |= {"n_train": len(train)}
     desc |= {"n_val": 0 if val is None else len(val), "n_test": 0}
     x_val = None if val is None else materialize(val, "val", progress)
     data = Data(materialize(train, "train", progress), x_val, None, names, desc)

@@ -101,33 +101,66 @@ def localisation(model, run: RunConfig, test: BoxFolder) -> dict:
     return {k: scores[k] for k in ("localised", "boxes", "box_iou", "box_iou_above_half")}
 
 
-def replayed(sim: Path | None, base: RunConfig, plan: FinetunePlan, ckpt: dict, pretrained: Path):
-    """(the dataset, ``plan.replay`` of its training prints as TensorData) from ``sim``, else from
-    the dataset the pretrained network trained on (its checkpoint's data path); (None, None)
-    when ``plan.replay`` is 0."""
-    from learn.data.load import is_dataset, materialize, open_split
-    from learn.data.load import subset as positions_of
+KEY_REPLAY = 1  # the replay pick's stream: SeedSequence(seed, spawn_key=(KEY_REPLAY, replay))
+
+
+def replay_source(sim: Path | None, base: RunConfig, plan: FinetunePlan, ckpt: dict, pretrained):
+    """(dataset path, its fingerprint, its train split's hand prints as a torch dataset) that
+    the pretrained start replays: ``sim`` (``--replay-from``), else the dataset the network
+    trained on (its checkpoint's data path); (None, None, None) when ``plan.replay`` is 0.
+    Checked before any work: a dataset, holding ``plan.replay`` training prints, and, with
+    both fingerprints known, the one the network trained on."""
+    from learn.data.load import fingerprint, is_dataset, open_split
 
     if plan.replay == 0:
-        return None, None
+        if sim is not None:
+            raise ConfigError(f"--replay-from {sim} with --replay 0: leave one of them out")
+        return None, None, None
+    stored = ckpt.get("data") or {}
     if sim is None:
-        stored = (ckpt.get("data") or {}).get("path")
-        if stored is None or not is_dataset(stored):
+        if stored.get("path") is None or not is_dataset(stored["path"]):
+            where = stored.get("path", "data it does not name")
             raise DataError(
-                f"--pretrained {pretrained}: trained on {stored or 'data it does not name'}, not a "
-                "dataset found here, so there is nothing to replay. Fix: --replay-from the "
-                "simulated dataset, or --replay 0"
+                f"--pretrained {pretrained}: trained on {where}, not a dataset found here, so "
+                "there is nothing to replay. Fix: --replay-from the simulated dataset, or "
+                "--replay 0"
             )
-        sim = Path(stored)
+        sim, flag = Path(stored["path"]), f"{stored['path']} (where --pretrained trained)"
     elif not is_dataset(sim):
         raise DataError(f"--replay-from {sim}: not a handskin dataset. Fix: handskin generate")
+    else:
+        flag = f"--replay-from {sim}"
+    now, theirs = fingerprint(sim), stored.get("fingerprint")
+    if (
+        now is not None
+        and theirs is not None
+        and Path(sim).resolve() == Path(stored.get("path", "")).resolve()
+        and now != theirs
+    ):
+        raise DataError(
+            f"{flag}: generated again since --pretrained {pretrained} trained on it (fingerprint "
+            f"{theirs[:12]}, now {now[:12]}). Fix: --replay-from the dataset it trained on"
+        )
     size, canvas = base.model.input_size, base.model.canvas_mm
     ds = open_split(sim, "train", "segment", size, None, plan.seed, canvas)
     if plan.replay > len(ds):
-        raise ConfigError(f"--replay {plan.replay}: {sim} holds {len(ds)} training prints")
-    rng = np.random.default_rng(np.random.SeedSequence([plan.seed, plan.replay]))
-    pick = np.sort(rng.choice(len(ds), plan.replay, replace=False))
-    return sim, materialize(positions_of(ds, pick), "replay", False)
+        raise ConfigError(
+            f"--replay {plan.replay}: {sim} holds {len(ds)} hand prints in its train split. "
+            f"Fix: --replay {len(ds)} or less"
+        )
+    return Path(sim), now, ds
+
+
+def replay_prints(ds, plan: FinetunePlan):
+    """``plan.replay`` prints of ``ds`` (TensorData), a seeded pick; None without a source."""
+    from learn.data.load import materialize
+    from learn.data.load import subset as positions_of
+
+    if ds is None:
+        return None
+    seq = np.random.SeedSequence(plan.seed, spawn_key=(KEY_REPLAY, plan.replay))
+    pick = np.sort(np.random.default_rng(seq).choice(len(ds), plan.replay, replace=False))
+    return materialize(positions_of(ds, pick), "replay", False)
 
 
 def with_replay(real, sim) -> tuple:
@@ -171,16 +204,17 @@ def run_finetune(
     train_folder, test_folder = BoxFolder.open(train), BoxFolder.open(test)
     if max(plan.ks) > len(train_folder):
         raise ConfigError(f"--ks {max(plan.ks)}: {train} holds {len(train_folder)} prints")
-    sim, replay = replayed(sim, base, plan, ckpt, pretrained)
-    out.mkdir(parents=True, exist_ok=True)
+    sim, sim_print, sim_ds = replay_source(sim, base, plan, ckpt, pretrained)
     results_path = out / "results.json"
     done = json.loads(results_path.read_text()) if results_path.is_file() else {"runs": []}
     key = {"pretrained": str(pretrained), "train": str(train), "test": str(test)}
-    key |= {"replay_from": None if sim is None else str(sim)}
+    key |= {"replay_from": None if sim is None else str(sim), "replay_fingerprint": sim_print}
     key = json.loads(json.dumps(key | {"plan": dataclasses.asdict(plan)}))  # as stored
-    if done.get("key", key) != key:
+    if as_now(done.get("key", key)) != key:
         raise DataError(f"{results_path} holds another experiment. Fix: another --out folder")
     done["key"] = key
+    out.mkdir(parents=True, exist_ok=True)
+    replay = replay_prints(sim_ds, plan)
     torch.set_num_threads(plan.threads)
     size = base.model.input_size
     pool = materialize(
@@ -213,6 +247,12 @@ def run_finetune(
     return done
 
 
+def as_now(key: dict) -> dict:
+    """A stored results key with the fields results written before replay lack: no replay."""
+    key = {"replay_from": None, "replay_fingerprint": None} | key
+    return key | {"plan": {"replay": 0} | key["plan"]}
+
+
 def summary(done: dict) -> list[dict]:
     """Per (start, k): mean, min and max localisation over its draws."""
     rows = []
@@ -238,6 +278,10 @@ def report(done: dict, plan: FinetunePlan) -> str:
     key = done["key"]
     words = ["handskin", "experiment", "real-finetune", "--pretrained", key["pretrained"]]
     words += ["--train", key["train"], "--test", key["test"]]
+    if plan.replay != FinetunePlan.replay:
+        words += ["--replay", str(plan.replay)]
+    if plan.replay and key.get("replay_from") is not None:
+        words += ["--replay-from", key["replay_from"]]
     zero = done["zero_shot"]
     lines = [
         "# A segmenter fine-tuned on k real prints",
@@ -248,8 +292,9 @@ def report(done: dict, plan: FinetunePlan) -> str:
         "its smallest box; a box is localised when the segmenter's majority class over its "
         "pixels is the box's part; chance about 1 in 6). Trained on k prints of the train fold "
         f"for {plan.steps} steps with the preset SegNet recipe, from the simulation-pretrained "
-        f"network (replaying {plan.replay} simulated prints beside them) and from a random "
-        "start, on the same draws.",
+        "network"
+        + (f" (replaying {plan.replay} simulated prints beside them)" if plan.replay else "")
+        + " and from a random start on the real prints alone, on the same draws.",
         "",
         f"Zero-shot (the pretrained network, no real print): {100 * zero['localised']:.1f} % of "
         f"{zero['boxes']} boxes.",

@@ -189,12 +189,13 @@ def check_same_data(held: dict, data: str | Path | None, who: str) -> None:
     """Refuse a run (checkpoint dict ``held``) trained on a dataset at ``data``'s path whose
     fingerprint has changed since: regenerated there with other settings, its images are not
     the ones the run learnt from. Runs of folders, or of datasets older than fingerprints, pass."""
-    theirs = (held.get("data") or {}).get("fingerprint")
+    stored = held.get("data") or {}
+    theirs = stored.get("fingerprint")
     now = None if data is None else fingerprint(data)
     if theirs is not None and now is not None and theirs != now:
         raise ConfigError(
-            f"{who} trained on {data} as it was generated then (fingerprint {theirs[:12]}); the "
-            f"dataset there now is another (fingerprint {now[:12]}), so going on would mix two "
-            "datasets in one network. Fix: train afresh in another --out (or --models) folder, "
-            "or move that run away"
+            f"{who} trained on {stored.get('path', 'a dataset')} (fingerprint {theirs[:12]}); "
+            f"{data} is another dataset (fingerprint {now[:12]}), generated with other settings, "
+            "so going on would mix two datasets in one network. Fix: train afresh in another "
+            "--out (or --models) folder, or move that run away"
         )

@@ -281,6 +281,13 @@ def test_resume_refuses_a_dataset_regenerated_at_the_same_path(
     res = runner.invoke(app, [*base, "--resume"])
     assert res.exit_code == 2 and first[:12] in res.output and fingerprint(data)[:12] in res.output
     assert "another --out" in res.output and _digest(run) == before
+    from learn.train.checkpoint import load_checkpoint, save_checkpoint
+
+    older = load_checkpoint(run / "last.pt")  # as written before checkpoints kept fingerprints
+    del older["data"]["fingerprint"]
+    save_checkpoint(older, run / "last.pt")
+    res = runner.invoke(app, [*base, "--resume"])
+    assert res.exit_code == 0, res.output
 
 
 def test_one_class_training_data_is_refused(app, tiny_writer, small_config, tmp_path):

@@ -39,6 +39,24 @@ def test_a_model_of_a_regenerated_dataset_is_not_reused(tiny_writer, tmp_path):
     assert first.stat().st_mtime_ns == stamp
 
 
+def test_an_experiment_model_keeps_its_dataset_fingerprint(tiny_writer, tmp_path):
+    """The experiments' shared models (`experiments.networks.resolve_model`) record the dataset's
+    fingerprint, so a regenerated dataset is refused there too."""
+    import shutil
+
+    from experiments.networks import resolve_model
+    from experiments.settings import TrainPlan
+
+    data = tiny_writer(tmp_path / "data", list(range(48)))
+    plan = TrainPlan(epochs=1)
+    first = resolve_model("handsnet", data, tmp_path / "models", None, plan, 0, False)
+    assert load_checkpoint(first)["data"]["fingerprint"] is not None
+    shutil.rmtree(data)
+    tiny_writer(data, list(range(48)), split="greedy")
+    with pytest.raises(ConfigError, match="fingerprint"):
+        resolve_model("handsnet", data, tmp_path / "models", None, plan, 0, False)
+
+
 def test_a_stopped_run_resumes_instead_of_being_reused(tiny_dataset, tmp_path):
     """A model whose training was cut short (here paused after epoch 1 of 2; a killed run
     leaves the same files) is continued to the end, and ends as an uninterrupted run does."""

@@ -183,7 +183,35 @@ def test_finetune_refuses_a_replay_source_before_any_work(real_like, checkpoints
     with pytest.raises(ConfigError, match="--replay 100000"):
         big = FinetunePlan(ks=(2,), draws=(1,), steps=1, threads=1, replay=100_000)
         run_finetune(checkpoints["segnet"], train_path, test_path, out, big, progress=False)
+    with pytest.raises(ConfigError, match=r"--replay-from .* with --replay 0"):
+        none = FinetunePlan(ks=(2,), draws=(1,), steps=1, threads=1, replay=0)
+        run_finetune(checkpoints["segnet"], train_path, test_path, out, none, False, test_path)
     assert not out.exists()
+
+
+def test_replay_changes_the_pretrained_runs_only(real_like, checkpoints, tmp_path):
+    """With and without replay the random starts are the same bytes, the pretrained ones not;
+    results written before replay existed resume as runs without it."""
+    train_path, test_path, _, _ = real_like
+    rows = {}
+    for replay in (0, 3):
+        plan = FinetunePlan(ks=(2,), draws=(1,), steps=3, threads=1, replay=replay)
+        done = run_finetune(
+            checkpoints["segnet"], train_path, test_path, tmp_path / f"r{replay}", plan, False
+        )
+        rows[replay] = {r["start"]: r for r in done["runs"]}
+    assert rows[0]["random"] == rows[3]["random"]
+    assert rows[0]["simulation"]["prints"] == rows[3]["simulation"]["prints"]
+    assert rows[0]["simulation"] != rows[3]["simulation"]
+    results = tmp_path / "r0" / "results.json"
+    old = json.loads(results.read_text())
+    for field in ("replay_from", "replay_fingerprint"):
+        del old["key"][field]
+    del old["key"]["plan"]["replay"]
+    results.write_text(json.dumps(old))
+    plan = FinetunePlan(ks=(2,), draws=(1,), steps=3, threads=1, replay=0)
+    again = run_finetune(checkpoints["segnet"], train_path, test_path, tmp_path / "r0", plan, False)
+    assert again["runs"] == old["runs"]
 
 
 def test_finetune_experiment_runs_resumes_and_charts(
