@@ -88,10 +88,7 @@ def train_once(
     dataset at ``data`` (its path) before it was regenerated with other settings.
     """
     last, best = out / LAST, out / BEST
-    held = last if last.is_file() else best
-    check_reusable(held, run)
-    if held.is_file():
-        check_same_data(load_checkpoint(held), data, f"{held}")
+    check_reusable(last if last.is_file() else best, run, data)
     if best.is_file() and (not last.is_file() or finished(out, run)):
         print(f"reusing {best}")
         return best, False
@@ -101,9 +98,10 @@ def train_once(
     return best, True
 
 
-def check_reusable(path: Path, run) -> None:
+def check_reusable(path: Path, run, data: str | Path | None = None) -> None:
     """ConfigError unless the checkpoint at ``path`` (when there is one) was trained with
-    ``run``'s configuration; where it trained (``device``) does not count."""
+    ``run``'s configuration (where it trained, ``device``, does not count) and, given its path,
+    on the dataset at ``data`` as it is now (`learn.train.state.check_same_data`)."""
     if not path.is_file():
         return
     ckpt = load_checkpoint(path)
@@ -115,3 +113,4 @@ def check_reusable(path: Path, run) -> None:
             f"(stored {stored.model.arch} {stored.train}, asked {run.model.arch} {run.train}). "
             "Fix: give another --models folder, or delete that folder to retrain"
         )
+    check_same_data(ckpt, data, str(path))
