@@ -23,6 +23,7 @@ from tactile.files import require_output, write_text_atomic
 from tactile.images.labels import IGNORE
 from tactile.prints.shapes import (
     CHIRALITY,
+    EXTENT,
     LAYOUT,
     MIN_BLOB_PX,
     STATISTICS,
@@ -252,7 +253,8 @@ def shape_report(
             tile_in=2.0,
         )
     layout = {k: (f"{label} (box centres), mm", "{:.0f}") for k, label in LAYOUT.items()}
-    for key, (label, fmt) in (STATISTICS | layout).items():
+    extent = {k: (f"extent {label}, mm", "{:.0f}") for k, label in EXTENT.items()}
+    for key, (label, fmt) in (STATISTICS | extent | layout).items():
         cells = []
         for name, s in sets.items():
             q = quartiles(s.values[key])

@@ -29,6 +29,10 @@ part boxes (a part boxed twice: its largest box), averaged over the pairs the pr
 to each finger, palm to thumb, neighbouring fingers, index to little finger. They say whether a
 simulated hand puts its marks as far apart as real hands do (marks closer than a pad pitch fuse).
 
+How far a print reaches each way (`EXTENT`): the rows and the columns its contact spans, in mm
+(on the paper's map rows run around the link, columns along it): the span alone does not say
+whether a hand wraps the link or lies along it.
+
 Which way a print is drawn (`CHIRALITY`): ``thumb_right`` is 1 when the thumb's box lies to the
 right of the line from the palm's box to the fingers' (their mean centre), with the fingers
 pointing up and rows running down, 0 when to the left (NaN without palm, thumb and a finger): a
@@ -69,6 +73,10 @@ LAYOUT = {  # name: what the report calls it (mm between part box centres)
     "neighbour_mm": "neighbouring fingers",
     "index_pinkie_mm": "index to little finger",
 }
+EXTENT = {  # name: what the report calls it (mm of skin the contact spans)
+    "rows_mm": "down the rows (around the link on the paper's map)",
+    "cols_mm": "along the columns (along the link)",
+}
 CHIRALITY = {
     "thumb_right": "prints drawn like a right hand (thumb right of the fingers)",
     "little_along": "prints with index to little finger along +columns (+-45 deg)",
@@ -78,7 +86,7 @@ WITHOUT_PALM = "prints without a palm (the digits alone)"
 
 @dataclass
 class Shapes:
-    """The statistics of S prints: one (S,) float array per name of `STATISTICS` and `LAYOUT`
+    """The statistics of S prints: one (S,) float array per name of `STATISTICS`, `EXTENT`, `LAYOUT`
     (NaN where a print has no value: no finger boxed, no boxed contact, a part missing), and each
     print's ``action``."""
 
@@ -110,12 +118,12 @@ def print_shape(
     level: int = CONTACT_LEVEL,
     min_blob_px: int = MIN_BLOB_PX,
 ) -> dict[str, float]:
-    """The six statistics of one print: ``image`` (H, W) uint8, ``boxes`` (K, 5) int (part, r0,
-    r1, c0, c1, px)."""
+    """The six statistics and the extents of one print: ``image`` (H, W) uint8, ``boxes`` (K, 5)
+    int (part, r0, r1, c0, c1, px)."""
     blobs = contact_blobs(image, level, min_blob_px)
     contact = blobs > 0
     rows, cols = np.nonzero(contact)
-    span = max(np.ptp(rows), np.ptp(cols)) + 1 if len(rows) else 0
+    down, along = (np.ptp(rows) + 1, np.ptp(cols) + 1) if len(rows) else (0, 0)
     labels = np.where(contact, box_labels(image, boxes, level), 0)
     boxed = (labels > 0) & (labels != IGNORE)
     fingers = set(boxes[:, 0].tolist()) - {PALM}
@@ -127,7 +135,9 @@ def print_shape(
     return {
         "blobs": float(blobs.max(initial=0)),
         "area_mm2": float(contact.sum()) * step_mm**2,
-        "span_mm": float(span) * step_mm,
+        "span_mm": float(max(down, along)) * step_mm,
+        "rows_mm": float(down) * step_mm,
+        "cols_mm": float(along) * step_mm,
         "parts": float(len(set(boxes[:, 0].tolist()))),
         "finger_blobs": len(own) / len(fingers) if fingers else np.nan,
         "palm_share": (labels == PALM).sum() / boxed.sum() if boxed.any() else np.nan,
@@ -186,7 +196,8 @@ def boxes_of_labels(
 
 
 def _stack(rows: list[dict[str, float]], action) -> Shapes:
-    values = {k: np.array([r[k] for r in rows], float) for k in (*STATISTICS, *LAYOUT, *CHIRALITY)}
+    keys = (*STATISTICS, *EXTENT, *LAYOUT, *CHIRALITY)
+    values = {k: np.array([r[k] for r in rows], float) for k in keys}
     return Shapes(values, np.asarray(action, str))
 
 
@@ -243,11 +254,15 @@ def inside(value: float, iqr: tuple[float, float, float] | None) -> bool:
 
 
 def shapes_markdown(sets: dict[str, Shapes], reference: str | None = None) -> str:
-    """The six statistics of each named set as median [IQR], side by side, then where the parts
-    lie (`LAYOUT`) alike; with ``reference`` (a set's name), a last column says whether each
-    other set's median lies inside its IQR. Sets with actions get a table of medians by action."""
+    """The six statistics of each named set as median [IQR], side by side, then its extents
+    (`EXTENT`) and where the parts lie (`LAYOUT`) alike; with ``reference`` (a set's name), a
+    last column says whether each other set's median lies inside its IQR. Sets with actions get
+    a table of medians by action."""
     layout = {k: (f"{label}, mm", "{:.0f}") for k, label in LAYOUT.items()}
     lines = _table(sets, reference, "print statistic", STATISTICS)
+    lines += ["", "How far the contact reaches each way.", ""]
+    extent = {k: (f"{label}, mm", "{:.0f}") for k, label in EXTENT.items()}
+    lines += _table(sets, reference, "print extent", extent)
     lines += ["", "Where the parts lie: distances between part box centres.", ""]
     lines += _table(sets, reference, "part box centres", layout)
     for key, label in CHIRALITY.items():

@@ -129,6 +129,7 @@ def test_print_shape_counted_by_hand():
     # blobs of >= 30 px above level 4: palm 300, thumb 50, index 60 (the 6-px blob is a speck)
     assert s["blobs"] == 3 and s["area_mm2"] == 410
     assert s["span_mm"] == 40  # rows 2..34 (33), columns 10..49 (40)
+    assert s["rows_mm"] == 33 and s["cols_mm"] == 40
     assert s["parts"] == 3
     assert s["finger_blobs"] == 1.0  # thumb and index each alone in a blob
     assert s["palm_share"] == pytest.approx(300 / 410)
@@ -137,6 +138,7 @@ def test_print_shape_counted_by_hand():
     s = print_shape(fused, folder_boxes)
     assert s["blobs"] == 2 and s["finger_blobs"] == 0.5  # the index shares its blob now
     assert print_shape(img, folder_boxes, step_mm=2.0)["area_mm2"] == 4 * 410
+    assert print_shape(img.T.copy(), folder_boxes[:, [0, 3, 4, 1, 2]])["rows_mm"] == 40
 
 
 def test_part_layout_measured_by_hand():
