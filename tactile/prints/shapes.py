@@ -77,6 +77,9 @@ EXTENT = {  # name: what the report calls it (mm of skin the contact spans)
     "rows_mm": "down the rows (around the link on the paper's map)",
     "cols_mm": "along the columns (along the link)",
 }
+DIRECTION = {  # name: what the report calls it (degrees on the map)
+    "fingers_deg": "palm to fingers, deg from +rows towards +columns (a left hand mirrored)",
+}
 CHIRALITY = {
     "thumb_right": "prints drawn like a right hand (thumb right of the fingers)",
     "little_along": "prints with index to little finger along +columns (+-45 deg)",
@@ -86,9 +89,9 @@ WITHOUT_PALM = "prints without a palm (the digits alone)"
 
 @dataclass
 class Shapes:
-    """The statistics of S prints: one (S,) float array per name of `STATISTICS`, `EXTENT`, `LAYOUT`
-    (NaN where a print has no value: no finger boxed, no boxed contact, a part missing), and each
-    print's ``action``."""
+    """The statistics of S prints: one (S,) float array per name of `STATISTICS`, `EXTENT`,
+    `LAYOUT`, `DIRECTION` (NaN where a print has no value: no finger boxed, no boxed contact, a
+    part missing), and each print's ``action``."""
 
     values: dict[str, np.ndarray]
     action: np.ndarray = field(default_factory=lambda: np.zeros(0, str))
@@ -147,8 +150,11 @@ def print_shape(
 def part_layout(boxes: np.ndarray, step_mm: float = 1.0) -> dict[str, float]:
     """Distances (mm) between the part box centres of one print, ``boxes`` (K, 5+) int (part, r0,
     r1, c0, c1, ...) on a ``step_mm`` grid, one value per name of `LAYOUT` (NaN where the print
-    lacks the parts): each the mean over the print's pairs of that kind; and ``thumb_right``,
-    ``little_along`` (`CHIRALITY`)."""
+    lacks the parts): each the mean over the print's pairs of that kind; ``thumb_right``,
+    ``little_along`` (`CHIRALITY`); and ``fingers_deg`` (`DIRECTION`): where the fingers point,
+    the direction from the palm's centre to the mean of the fingers' in degrees from +rows
+    towards +columns, a left-drawn hand's mirrored across the rows (-180 - angle) so that both
+    hands read alike (NaN without palm, thumb and a finger)."""
     centre = {}
     for part in np.unique(boxes[:, 0]).tolist():
         b = boxes[boxes[:, 0] == part]
@@ -164,12 +170,16 @@ def part_layout(boxes: np.ndarray, step_mm: float = 1.0) -> dict[str, float]:
     if INDEX in centre and PINKIE in centre:
         dr, dc = centre[PINKIE] - centre[INDEX]
         little_along = float(dc > abs(dr))
-    thumb_right = np.nan
+    thumb_right = fingers_deg = np.nan
     if PALM in centre and THUMB in centre and fingers:
         (vr, vc), (wr, wc) = np.mean(fingers, axis=0) - centre[PALM], centre[THUMB] - centre[PALM]
         thumb_right = float(vc * wr - vr * wc > 0)
+        angle = np.degrees(np.arctan2(vc, vr))
+        angle = angle if thumb_right else -180.0 - angle
+        fingers_deg = float((angle + 180.0) % 360.0 - 180.0)
     return {
         "thumb_right": thumb_right,
+        "fingers_deg": fingers_deg,
         "little_along": little_along,
         "palm_finger_mm": mean_dist((PALM, f) for f in FINGERS),
         "palm_thumb_mm": mean_dist([(PALM, THUMB)]),
@@ -196,7 +206,7 @@ def boxes_of_labels(
 
 
 def _stack(rows: list[dict[str, float]], action) -> Shapes:
-    keys = (*STATISTICS, *EXTENT, *LAYOUT, *CHIRALITY)
+    keys = (*STATISTICS, *EXTENT, *LAYOUT, *DIRECTION, *CHIRALITY)
     values = {k: np.array([r[k] for r in rows], float) for k in keys}
     return Shapes(values, np.asarray(action, str))
 
@@ -255,9 +265,9 @@ def inside(value: float, iqr: tuple[float, float, float] | None) -> bool:
 
 def shapes_markdown(sets: dict[str, Shapes], reference: str | None = None) -> str:
     """The six statistics of each named set as median [IQR], side by side, then its extents
-    (`EXTENT`) and where the parts lie (`LAYOUT`) alike; with ``reference`` (a set's name), a
-    last column says whether each other set's median lies inside its IQR. Sets with actions get
-    a table of medians by action."""
+    (`EXTENT`), where the parts lie (`LAYOUT`) and where the fingers point (`DIRECTION`) alike;
+    with ``reference`` (a set's name), a last column says whether each other set's median lies
+    inside its IQR. Sets with actions get a table of medians by action."""
     layout = {k: (f"{label}, mm", "{:.0f}") for k, label in LAYOUT.items()}
     lines = _table(sets, reference, "print statistic", STATISTICS)
     lines += ["", "How far the contact reaches each way.", ""]
@@ -265,6 +275,9 @@ def shapes_markdown(sets: dict[str, Shapes], reference: str | None = None) -> st
     lines += _table(sets, reference, "print extent", extent)
     lines += ["", "Where the parts lie: distances between part box centres.", ""]
     lines += _table(sets, reference, "part box centres", layout)
+    lines += ["", "Where the fingers point.", ""]
+    direction = {k: (label, "{:.0f}") for k, label in DIRECTION.items()}
+    lines += _table(sets, reference, "direction", direction)
     for key, label in CHIRALITY.items():
         shares = [f"{n} {chirality(sets[n], key):.2f}" for n in sets]
         if any(np.isfinite(chirality(sets[n], key)) for n in sets):

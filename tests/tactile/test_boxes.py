@@ -172,6 +172,25 @@ def test_part_layout_measured_by_hand():
     assert all(np.isnan(v) for v in alone.values())
 
 
+def test_where_the_fingers_point_reads_alike_for_either_hand():
+    """The direction from the palm's centre to the fingers', degrees from +rows towards +columns;
+    a left-drawn hand is mirrored across the rows so that a hand and its mirror read alike."""
+    right = np.array(
+        [
+            [PALM, 40, 60, 40, 60],  # centre (50, 50)
+            [INDEX, 75, 85, 15, 25],  # (80, 20): fingers down and to the left, -45 deg
+            [THUMB, 15, 25, 15, 25],  # (20, 20): up and left, right of the fingers
+        ]
+    )
+    d = part_layout(right)
+    assert d["thumb_right"] == 1.0 and d["fingers_deg"] == pytest.approx(-45.0)
+    left = right.copy()
+    left[:, 1:3] = 100 - right[:, 2:0:-1]  # mirrored top to bottom: fingers up, a left hand
+    d = part_layout(left)
+    assert d["thumb_right"] == 0.0 and d["fingers_deg"] == pytest.approx(-45.0)
+    assert np.isnan(part_layout(right[:2])["fingers_deg"])  # no thumb: chirality unknown
+
+
 def test_simulated_prints_are_boxed_tightly_around_each_part():
     img, _ = drawn_print()
     labels = np.zeros_like(img)
