@@ -10,6 +10,7 @@ A second dataset is drawn dashed (histograms) or hatched (bars).
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from tactile.files import save_figure
 from tactile.images.labels import PALETTE
 from tactile.prints.anchors import ANCHORS
 from tactile.prints.figures import PARTS
-from tactile.prints.shapes import STATISTICS, quartiles
+from tactile.prints.shapes import DIRECTION, EXTENT, STATISTICS, quartiles
 from tactile.prints.stats import DatasetStats
 
 KIND_COLOURS = {"hand": "#c0392b", "object": "#2471a3", "body": "#229954", "non_hand": "#7d3c98"}
@@ -181,11 +182,15 @@ def save_stats_png(stats: list[DatasetStats], png: str | Path) -> Path:
 
 
 def save_shapes_png(sets: dict, png: str | Path, reference: str | None = None) -> Path:
-    """Draw the six print statistics (`tactile.prints.shapes.STATISTICS`) of named
-    `tactile.prints.shapes.Shapes` as box plots side by side (box: IQR, line: median, whiskers:
-    5th and 95th percentiles), the IQR of ``reference`` shaded across each panel."""
-    fig = Figure(figsize=(15, 8.5), layout="constrained")
-    for ax, (key, (label, _)) in zip(fig.subplots(2, 3).ravel(), STATISTICS.items(), strict=True):
+    """Draw the six print statistics (`tactile.prints.shapes.STATISTICS`), the two extents
+    (`EXTENT`) and where the fingers point (`DIRECTION`) of named `tactile.prints.shapes.Shapes` as
+    box plots side by side (box: IQR, line: median, whiskers: 5th and 95th percentiles), the IQR
+    of ``reference`` shaded across each panel."""
+    panels = {k: label for k, (label, _) in STATISTICS.items()}
+    panels |= {k: f"extent {label}, mm" for k, label in EXTENT.items()}
+    panels |= DIRECTION
+    fig = Figure(figsize=(15, 12.5), layout="constrained")
+    for ax, (key, label) in zip(fig.subplots(3, 3).ravel(), panels.items(), strict=True):
         data = [s.values[key][np.isfinite(s.values[key])] for s in sets.values()]
         ref = None if reference is None else quartiles(sets[reference].values[key])
         if ref is not None:
@@ -198,7 +203,7 @@ def save_shapes_png(sets: dict, png: str | Path, reference: str | None = None) -
             medianprops={"color": "#c0392b", "linewidth": 2},
         )
         ax.set_xticks(range(1, len(sets) + 1), [f"{n}\n({len(s)} prints)" for n, s in sets.items()])
-        ax.set_title(label, fontsize=10)
+        ax.set_title(textwrap.fill(label, 60), fontsize=10)
         ax.tick_params(labelsize=8)
     fig.suptitle("print shapes: " + ", ".join(sets), fontsize=12)
     return save_figure(fig, png)
