@@ -12,12 +12,16 @@ what ``handskin evaluate`` reports when its data is a box folder.
   it (the rule of the box-derived labels); for every real part box, the segmenter's majority
   class over its pixels is right when it is the box's part (chance about 1 in 6), per part and
   overall. And the **box IoU**: each real box against the tight box around the pixels the
-  segmenter gives its part (0 where it gives none), with the share above 0.5.
+  segmenter gives its part (0 where it gives none), with the share above 0.5. What each part's
+  boxes are **taken for** (the majority classes, a confusion table), and the localisation **by
+  where the print's fingers point** (`tactile.prints.shapes.DIRECTION`, from its boxes): the
+  real folds' hands mostly point one way, and a network fails where simulation put few hands.
 - A picture: real prints with their boxes and the predicted parts over them.
 """
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -36,8 +40,12 @@ from tactile.dataset.reader import DatasetReader
 from tactile.errors import ConfigError, DataError
 from tactile.files import save_figure, write_text_atomic
 from tactile.images.labels import CLASS_NAMES, PALETTE
+from tactile.prints.shapes import part_layout
 
 PARTS = CLASS_NAMES[1:]
+# Bins of `fingers_deg` (palm to fingers, degrees from +rows towards +columns, a left-drawn hand
+# mirrored) for the localisation by direction: 45 degrees each, from -180.
+DIRECTION_EDGES_DEG = np.arange(-180, 181, 45)
 BATCH = 64  # images per forward pass on the simulated negatives
 
 
@@ -132,7 +140,8 @@ def part_localisation(pred: Predictor, folder: BoxFolder) -> tuple[dict, list[np
         p = folder[i]
         prediction = segment(p.image, pred)
         predictions.append(prediction)
-        boxes += localise(prediction, p.image, p.boxes)
+        deg = part_layout(p.boxes)["fingers_deg"]
+        boxes += [b | {"deg": deg} for b in localise(prediction, p.image, p.boxes)]
     scored = [b for b in boxes if b["pixels"]]
     per_part = {}
     for part in range(1, len(CLASS_NAMES)):
@@ -153,8 +162,50 @@ def part_localisation(pred: Predictor, folder: BoxFolder) -> tuple[dict, list[np
         "box_iou": float(ious.mean()) if len(ious) else float("nan"),
         "box_iou_above_half": float((ious > 0.5).mean()) if len(ious) else float("nan"),
         "per_part": per_part,
+        "taken_for": taken_for(scored),
+        "by_direction": by_direction(scored),
     }
     return scores, predictions
+
+
+def taken_for(scored: list[dict]) -> dict[str, list[int]]:
+    """Per part: how many of its boxes had each class (`CLASS_NAMES`, background first) as
+    their majority."""
+    out = {}
+    for part in range(1, len(CLASS_NAMES)):
+        said = [b["majority"] for b in scored if b["part"] == part]
+        out[CLASS_NAMES[part]] = np.bincount(said, minlength=len(CLASS_NAMES)).tolist()
+    return out
+
+
+def by_direction(scored: list[dict]) -> list[dict]:
+    """Localisation of the boxes of prints whose fingers point into each bin of
+    `DIRECTION_EDGES_DEG`, then of prints without a direction (no palm, thumb or finger boxed)."""
+    deg = np.array([b["deg"] for b in scored], float)
+    right = np.array([b["majority"] == b["part"] for b in scored], bool)
+    edges = DIRECTION_EDGES_DEG
+    bins = [
+        (float(lo), float(hi), (deg >= lo) & (deg < hi)) for lo, hi in itertools.pairwise(edges)
+    ]
+    bins[-1] = (*bins[-1][:2], bins[-1][2] | (deg == edges[-1]))
+    out = [
+        {"from_deg": lo, "to_deg": hi, "boxes": int(m.sum()), "localised": _share(right, m)}
+        for lo, hi, m in bins
+    ]
+    none = np.isnan(deg)
+    out.append(
+        {
+            "from_deg": None,
+            "to_deg": None,
+            "boxes": int(none.sum()),
+            "localised": _share(right, none),
+        }
+    )
+    return out
+
+
+def _share(right: np.ndarray, mask: np.ndarray) -> float:
+    return float(right[mask].mean()) if mask.any() else float("nan")
 
 
 def evaluate_real(
@@ -247,7 +298,53 @@ def real_markdown(rows: list[dict]) -> list[str]:
             f"of their own are left out ({left_out}).",
             "",
         ]
+        lines += confusion_markdown(seg) + direction_markdown(seg)
     return lines
+
+
+def confusion_markdown(seg: list[dict]) -> list[str]:
+    """Per segmenter: what each part's boxes were taken for, % of its boxes per class."""
+    lines = ["### What each part's boxes are taken for", ""]
+    for r in seg:
+        lines += [
+            f"`{r['checkpoint']}`: % of each real part's boxes by the class most of their "
+            "pixels got.",
+            "",
+            "| real box | " + " | ".join(CLASS_NAMES) + " |",
+            "|---|" + "---|" * len(CLASS_NAMES),
+        ]
+        for part, counts in r["taken_for"].items():
+            n = max(1, sum(counts))
+            lines.append(f"| {part} | " + " | ".join(f"{100 * c / n:.0f}" for c in counts) + " |")
+        lines.append("")
+    return lines
+
+
+def direction_markdown(seg: list[dict]) -> list[str]:
+    """Localisation by where the real print's fingers point (`by_direction`), a column per
+    segmenter."""
+    lines = [
+        "### By where the fingers point",
+        "",
+        "Palm to fingers, degrees from +rows towards +columns, a left-drawn hand mirrored "
+        "(`handskin stats`); % localised (boxes).",
+        "",
+        "| fingers point, deg | " + " | ".join(f"`{r['checkpoint']}`" for r in seg) + " |",
+        "|---|" + "---|" * len(seg),
+    ]
+    for k, b in enumerate(seg[0]["by_direction"]):
+        name = (
+            "no palm, thumb or finger"
+            if b["from_deg"] is None
+            else (f"{b['from_deg']:.0f} to {b['to_deg']:.0f}")
+        )
+        cells = [r["by_direction"][k] for r in seg]
+        lines.append(
+            f"| {name} | "
+            + " | ".join(f"{_pct(c['localised'])} ({c['boxes']})" for c in cells)
+            + " |"
+        )
+    return [*lines, ""]
 
 
 def real_picture(folder: str | Path, predictions: list[np.ndarray], png: Path, n: int = 8) -> Path:

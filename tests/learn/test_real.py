@@ -24,7 +24,7 @@ from tactile.dataset import open_dataset
 from tactile.dataset.boxes import BoxFolder, box_labels
 from tactile.errors import ConfigError, DataError
 from tactile.images.labels import CLASS_NAMES, IGNORE
-from tactile.prints.shapes import boxes_of_labels
+from tactile.prints.shapes import boxes_of_labels, part_layout
 
 SIZE = (32, 48)
 
@@ -81,10 +81,12 @@ def test_localise_counted_by_hand():
     assert got[0]["iou"] == pytest.approx(8 / 36) and got[1]["iou"] == 0.0
 
 
-def slow_localisation(seg_path, folder: BoxFolder) -> tuple[int, int]:
-    """(boxes localised, boxes with pixels): every pixel visited in a Python loop."""
+def slow_localisation(seg_path, folder: BoxFolder) -> tuple[int, int, list]:
+    """(boxes localised, boxes with pixels, (print, part, majority) of each box with pixels):
+    every pixel visited in a Python loop."""
     pred = load_predictor(seg_path)
     right = total = 0
+    said = []
     for i in range(len(folder)):
         p = folder[i]
         seg = predict_image(p.image, None, pred).segmentation
@@ -105,7 +107,8 @@ def slow_localisation(seg_path, folder: BoxFolder) -> tuple[int, int]:
             if votes[k].sum():
                 total += 1
                 right += int(votes[k].argmax() == b[0])
-    return right, total
+                said.append((i, b[0], int(votes[k].argmax())))
+    return right, total, said
 
 
 def test_evaluate_real_against_a_slow_reference(real_like, checkpoints, tiny_dataset):
@@ -125,10 +128,24 @@ def test_evaluate_real_against_a_slow_reference(real_like, checkpoints, tiny_dat
     with open_dataset(tiny_dataset) as ds:
         test_idx = np.asarray(ds.splits["test"])
         assert clf["n_non_hand"] == int((ds.is_hand[:][test_idx] == 0).sum())
-    right, total = slow_localisation(checkpoints["segnet"], test)
+    right, total, said = slow_localisation(checkpoints["segnet"], test)
     assert seg["boxes"] == total and seg["localised"] == pytest.approx(right / total)
     assert sum(v["boxes"] for v in seg["per_part"].values()) == total
     assert len(predictions) == len(test)
+    for part, counts in seg["taken_for"].items():
+        k = CLASS_NAMES.index(part)
+        assert counts == [sum(1 for _, p, m in said if p == k and m == c) for c in range(7)]
+    # by where the fingers point: 45-degree bins from -180 (the last one closed), then none
+    deg = np.array([part_layout(test[i].boxes)["fingers_deg"] for i, _, _ in said])
+    ok = np.array([p == m for _, p, m in said])
+    rows_deg = seg["by_direction"]
+    assert sum(r["boxes"] for r in rows_deg) == total and rows_deg[-1]["from_deg"] is None
+    assert rows_deg[-1]["boxes"] == int(np.isnan(deg).sum())
+    for r in rows_deg[:-1]:
+        m = (deg >= r["from_deg"]) & ((deg < r["to_deg"]) | (r["to_deg"] == 180) & (deg == 180))
+        assert r["boxes"] == int(m.sum())
+        if m.any():
+            assert r["localised"] == pytest.approx(ok[m].mean())
 
 
 def test_box_folder_trains_a_segmenter_with_unlabelled_pixels_ignored(real_like):

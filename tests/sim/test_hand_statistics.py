@@ -150,6 +150,37 @@ def test_index_to_little_finger_runs_along_the_columns_as_in_the_real_folds(stat
     assert abs(sim.mean() - p) < 3 * sd, f"{sim.mean():.3f} of {len(sim)} vs real {p:.3f}"
 
 
+@pytest.mark.xfail(
+    strict=True,
+    reason="every simulated operator stands on one side; 12 % of trials across the link matched "
+    "the real share (11.8 %) but moved no real score and turned fewer prints' index-to-little "
+    "along the columns (docs/findings.md)",
+)
+def test_some_people_stand_across_the_link_as_in_the_real_folds(stats, shared_data):
+    """Some of the paper's people stood across the link from the others: in the real folds 12 %
+    of the prints with palm, thumb and a finger boxed point their fingers more than 120 deg from
+    the folds' median direction (the hand turned half a circle); the generated prints should as
+    often, within 2 binomial sd (95 %; with every operator on one side 4.8 % of 166, 2.4 sd
+    under; with 12 % of trials across 11.8 % of 161)."""
+
+    def turned(directions) -> np.ndarray:
+        d = np.array(directions)
+        return d[np.isfinite(d)]
+
+    real = turned([part_layout(p.boxes)["fingers_deg"] for p in real_folds(shared_data)])
+    sim = turned(
+        [
+            part_layout(boxes_of_labels(s["label_image"], s["image"]))["fingers_deg"]
+            for s in stats["samples"]
+        ]
+    )
+    main = np.median(real)
+    away_real, away_sim = (np.abs((d - main + 180.0) % 360.0 - 180.0) > 120.0 for d in (real, sim))
+    p = away_real.mean()
+    sd = np.sqrt(p * (1 - p) * (1 / len(real) + 1 / len(sim)))
+    assert abs(away_sim.mean() - p) < 2 * sd, f"{away_sim.mean():.3f} of {len(sim)} vs real {p:.3f}"
+
+
 def test_palms_break_into_pads_as_often_as_in_the_real_folds(stats, shared_data):
     """A palm on a link bears on its metacarpal heads, heel and eminences, not over the hollow
     (`sim.contactors.hand`, ``METACARPAL_SHAFT``): in the real folds 66 % of boxed palms lie in
