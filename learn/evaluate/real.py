@@ -180,28 +180,17 @@ def taken_for(scored: list[dict]) -> dict[str, list[int]]:
 
 def by_direction(scored: list[dict]) -> list[dict]:
     """Localisation of the boxes of prints whose fingers point into each bin of
-    `DIRECTION_EDGES_DEG`, then of prints without a direction (no palm, thumb or finger boxed)."""
+    `DIRECTION_EDGES_DEG` (``fingers_deg`` lies in [-180, 180)), then of prints without a
+    direction (no palm, thumb or finger boxed)."""
     deg = np.array([b["deg"] for b in scored], float)
     right = np.array([b["majority"] == b["part"] for b in scored], bool)
     edges = DIRECTION_EDGES_DEG
-    bins = [
-        (float(lo), float(hi), (deg >= lo) & (deg < hi)) for lo, hi in itertools.pairwise(edges)
-    ]
-    bins[-1] = (*bins[-1][:2], bins[-1][2] | (deg == edges[-1]))
-    out = [
+    bins = [(lo, hi, (deg >= lo) & (deg < hi)) for lo, hi in itertools.pairwise(edges.tolist())]
+    bins.append((None, None, np.isnan(deg)))
+    return [
         {"from_deg": lo, "to_deg": hi, "boxes": int(m.sum()), "localised": _share(right, m)}
         for lo, hi, m in bins
     ]
-    none = np.isnan(deg)
-    out.append(
-        {
-            "from_deg": None,
-            "to_deg": None,
-            "boxes": int(none.sum()),
-            "localised": _share(right, none),
-        }
-    )
-    return out
 
 
 def _share(right: np.ndarray, mask: np.ndarray) -> float:
@@ -333,11 +322,9 @@ def direction_markdown(seg: list[dict]) -> list[str]:
         "|---|" + "---|" * len(seg),
     ]
     for k, b in enumerate(seg[0]["by_direction"]):
-        name = (
-            "no palm, thumb or finger"
-            if b["from_deg"] is None
-            else (f"{b['from_deg']:.0f} to {b['to_deg']:.0f}")
-        )
+        name = "no palm, thumb or finger"
+        if b["from_deg"] is not None:
+            name = f"{b['from_deg']} to {b['to_deg']}"
         cells = [r["by_direction"][k] for r in seg]
         lines.append(
             f"| {name} | "

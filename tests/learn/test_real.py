@@ -135,14 +135,14 @@ def test_evaluate_real_against_a_slow_reference(real_like, checkpoints, tiny_dat
     for part, counts in seg["taken_for"].items():
         k = CLASS_NAMES.index(part)
         assert counts == [sum(1 for _, p, m in said if p == k and m == c) for c in range(7)]
-    # by where the fingers point: 45-degree bins from -180 (the last one closed), then none
+    # by where the fingers point: 45-degree bins from -180, then none
     deg = np.array([part_layout(test[i].boxes)["fingers_deg"] for i, _, _ in said])
     ok = np.array([p == m for _, p, m in said])
     rows_deg = seg["by_direction"]
     assert sum(r["boxes"] for r in rows_deg) == total and rows_deg[-1]["from_deg"] is None
     assert rows_deg[-1]["boxes"] == int(np.isnan(deg).sum())
     for r in rows_deg[:-1]:
-        m = (deg >= r["from_deg"]) & ((deg < r["to_deg"]) | (r["to_deg"] == 180) & (deg == 180))
+        m = (deg >= r["from_deg"]) & (deg < r["to_deg"])
         assert r["boxes"] == int(m.sum())
         if m.any():
             assert r["localised"] == pytest.approx(ok[m].mean())
