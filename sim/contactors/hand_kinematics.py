@@ -193,21 +193,21 @@ JOINT_TORQUE_NM: dict[str, float] = {
     "palm_arch": 0.3,
 }
 # Strength of each digit: a multiplier on the torque limits (and servo gains) of all its joints.
-# Calibrated so that the hand's contact forces in grasps of the default forearm (60 grasps, seed 5,
-# MuJoCo contact forces of each part) share as people's do: index 30.4, middle 31.4, ring 23.3,
-# little 14.9 % of the four fingers' force (Li, J Hand Surg Am 27(5), 2002, maximal grip: 32.2 ±
-# 3.8, 32.6 ± 4.3, 23.5 ± 4.5, 11.7 ± 4.9 %) and the thumb 17 % of the five digits' (J Hand Surg
-# Am 2014, doi 10.1016/j.jhsa.2014.06.121: an estimated 17 % of grip strength). Equal limits gave
-# 24.6, 19.1, 24.5, 31.8 % and a thumb of 2 %: a short little finger pushes hardest on the same
-# torque. The thumb's 1.55 became 1.25 when the thenar eminence moved onto the palm
-# (`sim.contactors.hand`): no longer held back by the eminence, it took 20.6 % of 240 grasps'
-# digit force (seed 11), 16.6 % at 1.25.
+# Fitted so that the contact forces of 240 grasps of the default skin (tests/sim/
+# test_hand_anchors.py) share as people's do: index 32.9, middle 34.8, ring 22.1, little 10.2 % of
+# the four fingers' force (Li, J Hand Surg Am 27(5), 2002, maximal grip: 32.2 ± 3.8, 32.6 ± 4.3,
+# 23.5 ± 4.5, 11.7 ± 4.9 %) and the thumb 17.0 % of the five digits' (J Hand Surg Am 2014, doi
+# 10.1016/j.jhsa.2014.06.121: an estimated 17 % of grip strength). Equal limits gave 24.6, 19.1,
+# 24.5, 31.8 % and a thumb of 2 %: a short little finger pushes hardest on the same torque. The
+# fit depends on the grasp: the strengths fitted to grasps across the link (thumb 1.25, index 1.3,
+# middle 1.66, ring 0.88, little 0.29) gave the middle finger 38.1 % and the little one 7.3 % once
+# grasps held it obliquely (`sim.contactors.interactions.GRASP_YAW_DEG`).
 DIGIT_STRENGTH: dict[str, float] = {
-    "thumb": 1.25,
-    "index": 1.3,
-    "middle": 1.66,
-    "ring": 0.88,
-    "pinkie": 0.29,
+    "thumb": 1.35,
+    "index": 1.2,
+    "middle": 1.45,
+    "ring": 0.95,
+    "pinkie": 0.4,
 }
 SERVO_ERROR_AT_LIMIT_RAD = 0.6  # kp = torque limit / this: compliant, fingers conform to a surface
 

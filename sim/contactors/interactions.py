@@ -6,17 +6,17 @@ positions, plus free interactions. Everything is expressed in the skin frame of 
 of a right hand, palm facing the skin); ``yaw`` turns the hand's x away from the link axis.
 
 Operator positions. In front of the link, the operator's forearm is roughly perpendicular to the
-link, so the fingers lie *across* it (yaw 90 deg +- the subject's habit) and a grasp wraps the
-fingers around it with the palm on a face. At the side, the operator's forearm runs roughly
-along the link: pushes and pulls are done with the fingers *along* it (yaw 180 deg) and a grasp
-comes obliquely (yaw 135 deg), so fingers wrap the edge diagonally — a person at the side cannot
-put the fingers straight across without an extreme wrist posture. The operator stands where the
-paper's people stood (`INDEX_END`): the index finger nearer the link's base (z = 0), so a right
-hand and a left one yaw opposite ways. Measured on the real prints (../shared/data/real_hands,
-fold 1): index to little finger points along the map's columns (+-45 deg) in 71 % of prints and
-the other way in 15 %, thumb to fingers across them in 96 %; with either side drawn at random
-(and fingers turned towards more skin) the default set read 34 % and 34 % (600 hand prints, seed
-3), with the stance 70 % and 4 %. Free touches come from anywhere (fingers towards more skin).
+link, so pushes and pulls lay the fingers *across* it (yaw 90 deg +- the subject's habit). At the
+side, the operator's forearm runs roughly along the link: pushes and pulls are done with the
+fingers *along* it (yaw 180 deg). A grasp from either position holds the link obliquely across
+the palm (`GRASP_YAW_DEG`), as a power grasp holds a cylinder (Napier, J Bone Joint Surg 38-B,
+1956). The operator stands where the paper's people stood (`INDEX_END`): the index finger nearer
+the link's base (z = 0), so a right hand and a left one yaw opposite ways. Measured on the real
+prints (../shared/data/real_hands, fold 1): index to little finger points along the map's
+columns (+-45 deg) in 71 % of prints and the other way in 15 %, thumb to fingers across them in
+96 %; with either side drawn at random (and fingers turned towards more skin) the default set
+read 34 % and 34 % (600 hand prints, seed 3), with the stance 70 % and 4 %. Free touches come
+from anywhere (fingers towards more skin).
 
 Directions (the operator's view, palm down): push away = towards the fingertips, pull = towards
 the wrist (fingers hooked), push left / right = towards the operator's left / right (the hand's
@@ -78,6 +78,16 @@ SHEAR_FRACTION = (0.25, 0.6)  # shear / normal force (below the friction of skin
 TWIST_RANGE_NM = (0.2, 0.8)
 DURATIONS_S = (0.15, 0.25, 0.3, 0.2)  # approach, load, hold, release (nominal), s
 INDEX_END = 1.0  # +1: a right hand yaws +90 deg in front (index nearer z = 0); -1: the mirror
+# Yaw of every grasp (deg): the link lies obliquely across the palm, the fingers wrap the far edge
+# diagonally and the thumb the near one. Measured on the default set (1,710 hand prints) against
+# the real folds 1 / 2 (../shared/data/real_hands), front grasps across the link (yaw 90) -> all
+# grasps at this yaw: palm to fingers -1 [IQR -48, 26] -> -28 [-55, 16] deg (real -35 [-59, -21]
+# / -39 [-58, -24]); a grasp's thumb box 84 -> 53 mm from the map's top edge (real prints 41 /
+# 38); the middle finger's box 72 -> 80 mm from the palm's (real 82 / 83); blobs per print 4 [3,
+# 5] -> 5 [3, 5] (real 6 [4, 7] / 5 [4, 7]); the preset SegNet's real part localisation 69.6 /
+# 68.1 -> 71.6 / 70.8 %. The fingers' strengths were refitted to it
+# (`sim.contactors.hand_kinematics.DIGIT_STRENGTH`).
+GRASP_YAW_DEG = 135.0
 YAW_SD_DEG = 10.0  # trial-to-trial spread of the hand's yaw around the operator's nominal
 TILT_SD_DEG = 4.0
 TOWARD_SKIN_P = 0.85  # free touches: probability that the fingers point towards more skin
@@ -176,11 +186,11 @@ def nominal_yaw_deg(action: str, position: str, side: str, rng: np.random.Genera
     hand (``side``) and a left one yaw opposite ways so that the index finger is the one nearer
     the link's base; a free touch comes from anywhere."""
     hand = INDEX_END if side == "right" else -INDEX_END
-    if position == "front":
-        return 90.0 * hand
-    if position == "side":
-        return float(135.0 * hand if action.startswith("grasp") else 180.0)
-    return float(rng.uniform(-180.0, 180.0))
+    if position == "free":
+        return float(rng.uniform(-180.0, 180.0))
+    if action.startswith("grasp"):
+        return GRASP_YAW_DEG * hand
+    return 90.0 * hand if position == "front" else 180.0
 
 
 def _shear_twist(action: str, force_n: float, yaw: float, rng: np.random.Generator):
