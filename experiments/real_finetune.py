@@ -14,7 +14,11 @@ on) beside its real ones, each real print repeated to about as many: what simula
 user beside its weights, and what keeps 10 prints from pulling the network off everything it
 learnt (on held-out prints of the train fold, 10 prints: 69.6 % without replay at the preset
 rate, 72.6 % at a tenth of it, 73.9 % with 300 replayed; zero-shot 69.7; docs/findings.md). The
-random start trains on the real prints alone. The pretrained network with no real print (k = 0)
+random start trains on the real prints alone. Both starts train on the same copies of the real
+prints, each but the first moved and turned (``shift_mm``, ``turn_deg``; `learn.data.augment`): a
+hand pressing the same way elsewhere on the link and at another angle (chosen on held-out prints
+of the train fold, 10 prints, five draws: 72.6 % unmoved, 74.2 % moved up to 18 mm, 75.8 % also
+turned up to 15 deg; docs/findings.md). The pretrained network with no real print (k = 0)
 is the zero-shot point. Results are kept in
 ``results.json`` as they come: a stopped run resumes where it stopped.
 """
@@ -44,13 +48,16 @@ STARTS = ("simulation", "random")  # pretrained on simulated prints; a random st
 class FinetunePlan:
     """What the experiment runs: real prints per run (``ks``, count), draws of each (``draws``,
     one per k), optimisation ``steps`` per run, simulated prints the pretrained start replays
-    beside its real ones (``replay``, count; 0: none), the ``seed`` of the draws and of
-    training."""
+    beside its real ones (``replay``, count; 0: none), how far copies of the real prints are
+    moved on the map (``shift_mm``, mm, up to) and turned (``turn_deg``, deg, up to; both 0:
+    plain repeats), the ``seed`` of the draws and of training."""
 
     ks: tuple[int, ...] = (10, 30, 100, 342)
     draws: tuple[int, ...] = (3, 2, 1, 1)
     steps: int = 300
     replay: int = 300
+    shift_mm: float = 18.0
+    turn_deg: float = 15.0
     seed: int = 0
     threads: int = 2
 
@@ -61,6 +68,17 @@ class FinetunePlan:
             raise ConfigError("--ks and --steps: counts >= 1")
         if self.replay < 0:
             raise ConfigError(f"--replay {self.replay}: a count >= 0 of simulated prints")
+        if not self.shift_mm >= 0:
+            raise ConfigError(f"--shift-mm {self.shift_mm}: a distance >= 0 mm (0: not moved)")
+        if not 0 <= self.turn_deg <= 180:
+            raise ConfigError(
+                f"--turn-deg {self.turn_deg}: an angle in [0, 180] deg (0: not turned)"
+            )
+
+    @property
+    def moves(self) -> bool:
+        """Whether copies of the real prints are moved or turned."""
+        return self.shift_mm > 0 or self.turn_deg > 0
 
 
 QUICK = FinetunePlan(ks=(4, 12), draws=(2, 1), steps=6, replay=8)
@@ -102,6 +120,7 @@ def localisation(model, run: RunConfig, test: BoxFolder) -> dict:
 
 
 KEY_REPLAY = 1  # the replay pick's stream: SeedSequence(seed, spawn_key=(KEY_REPLAY, replay))
+KEY_MOVES = 2  # the moved copies' stream: SeedSequence(seed, spawn_key=(KEY_MOVES, k, draw))
 
 
 def replay_source(sim: Path | None, base: RunConfig, plan: FinetunePlan, ckpt: dict, pretrained):
@@ -163,16 +182,36 @@ def replay_prints(ds, plan: FinetunePlan):
     return materialize(positions_of(ds, pick), "replay", False)
 
 
-def with_replay(real, sim) -> tuple:
-    """Images and targets of the real prints, each repeated to about as many as the replayed
-    simulated ones (at least once), and of the replayed ones (``sim`` None: the real alone)."""
+def copies_of(k: int, plan: FinetunePlan, start: str) -> int:
+    """Copies of each of ``k`` real prints a run of ``start`` trains on: about as many in all as
+    the replayed simulated prints, at least one. With moved copies both starts take the same
+    copies, at least two; without, the random start takes the prints once."""
+    if start == "random" and not plan.moves:
+        return 1
+    return max(2 if plan.moves else 1, plan.replay // k)
+
+
+def shift_px(plan: FinetunePlan, frame_mm: tuple[int, int], size: tuple[int, int]) -> int:
+    """``plan.shift_mm`` in network input pixels: a ``frame_mm`` (rows, columns; the paper's
+    1 mm grid) image resized to ``size`` (h, w) px."""
+    return round(plan.shift_mm * min(size[0] / frame_mm[0], size[1] / frame_mm[1]))
+
+
+def training_set(real, sim, copies: int, shift: int, plan: FinetunePlan, draw: int) -> tuple:
+    """Images and targets of a run: the replayed simulated prints (``sim``; None: none), then
+    ``copies`` of the real ones, all but the first moved by up to ``shift`` px and turned by up
+    to ``plan.turn_deg`` (`learn.data.augment.moved_copies`; seeded by k and ``draw``, so both
+    starts see the same copies)."""
     import torch  # optional: the learn extra
 
+    from learn.data.augment import moved_copies
+
+    seq = np.random.SeedSequence(plan.seed, spawn_key=(KEY_MOVES, len(real.y), draw))
+    rng = np.random.default_rng(seq)
+    x, y = moved_copies(real.x, real.y, copies, shift, plan.turn_deg, rng)
     if sim is None:
-        return real.x, real.y
-    times = max(1, len(sim.y) // len(real.y))
-    x = torch.cat([sim.x, real.x.repeat(times, 1, 1, 1)])
-    return x, torch.cat([sim.y, real.y.repeat(times, 1, 1)])
+        return x, y
+    return torch.cat([sim.x, x]), torch.cat([sim.y, y])
 
 
 def run_finetune(
@@ -217,6 +256,7 @@ def run_finetune(
     replay = replay_prints(sim_ds, plan)
     torch.set_num_threads(plan.threads)
     size = base.model.input_size
+    shift = shift_px(plan, train_folder.frame_px or train_folder[0].image.shape, size)
     pool = materialize(
         BoxFolderDataset(train, None, "segment", size, flips=False), "real", progress
     )
@@ -233,7 +273,9 @@ def run_finetune(
                 ):
                     continue
                 real = TensorData(pool.x[idx], pool.y[idx])
-                x, y = with_replay(real, replay if start == "simulation" else None)
+                sim_part = replay if start == "simulation" else None
+                copies = copies_of(k, plan, start)
+                x, y = training_set(real, sim_part, copies, shift, plan, draw)
                 run = recipe(base, len(y), plan, draw)
                 data = Data(TensorData(x, y, pool.mirror), None, None, CLASS_NAMES, {"k": k})
                 init = ckpt if start == "simulation" else None
@@ -248,9 +290,10 @@ def run_finetune(
 
 
 def as_now(key: dict) -> dict:
-    """A stored results key with the fields results written before replay lack: no replay."""
+    """A stored results key with the fields results written before replay or moved copies
+    lack: no replay, plain repeats."""
     key = {"replay_from": None, "replay_fingerprint": None} | key
-    return key | {"plan": {"replay": 0} | key["plan"]}
+    return key | {"plan": {"replay": 0, "shift_mm": 0.0, "turn_deg": 0.0} | key["plan"]}
 
 
 def summary(done: dict) -> list[dict]:
@@ -282,6 +325,12 @@ def report(done: dict, plan: FinetunePlan) -> str:
         words += ["--replay", str(plan.replay)]
     if plan.replay and key.get("replay_from") is not None:
         words += ["--replay-from", key["replay_from"]]
+    for flag, value, default in (
+        ("--shift-mm", plan.shift_mm, FinetunePlan.shift_mm),
+        ("--turn-deg", plan.turn_deg, FinetunePlan.turn_deg),
+    ):
+        if value != default:
+            words += [flag, f"{value:g}"]
     zero = done["zero_shot"]
     lines = [
         "# A segmenter fine-tuned on k real prints",
@@ -294,7 +343,13 @@ def report(done: dict, plan: FinetunePlan) -> str:
         f"for {plan.steps} steps with the preset SegNet recipe, from the simulation-pretrained "
         "network"
         + (f" (replaying {plan.replay} simulated prints beside them)" if plan.replay else "")
-        + " and from a random start on the real prints alone, on the same draws.",
+        + " and from a random start on the real prints alone, on the same draws"
+        + (
+            f"; copies of the real prints moved up to {plan.shift_mm:g} mm and turned up to "
+            f"{plan.turn_deg:g} deg, the same for both starts."
+            if plan.moves
+            else "."
+        ),
         "",
         f"Zero-shot (the pretrained network, no real print): {100 * zero['localised']:.1f} % of "
         f"{zero['boxes']} boxes.",
@@ -371,6 +426,14 @@ def real_finetune(
     replay_from: O.opt(
         Path | None, "Simulated dataset to replay (default: the one --pretrained trained on)."
     ) = None,
+    shift_mm: O.opt(
+        float | None, "Copies of the real prints moved up to this far on the map (mm; default 18)."
+    ) = None,
+    turn_deg: O.opt(
+        float | None,
+        "Copies of the real prints turned up to this much (deg; default 15; with --shift-mm 0: "
+        "plain repeats).",
+    ) = None,
     quick: O.QuickOpt = False,
     seed: O.SeedOpt = 0,
     threads: O.ThreadsOpt = 2,
@@ -387,6 +450,8 @@ def real_finetune(
         "draws": O.parse_list("--draws", draws, int),
         "steps": steps,
         "replay": replay,
+        "shift_mm": shift_mm,
+        "turn_deg": turn_deg,
     }
     changes = {k: v for k, v in changes.items() if v is not None}
     plan = dataclasses.replace(base, seed=seed, threads=threads, **changes)

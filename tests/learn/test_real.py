@@ -14,7 +14,14 @@ import torch
 from PIL import Image
 from typer.testing import CliRunner
 
-from experiments.real_finetune import FinetunePlan, run_finetune, subset, with_replay
+from experiments.real_finetune import (
+    FinetunePlan,
+    copies_of,
+    run_finetune,
+    shift_px,
+    subset,
+    training_set,
+)
 from handskin.cli import app
 from learn.data.boxes import BoxFolderDataset
 from learn.evaluate.real import evaluate_real, localise
@@ -178,17 +185,85 @@ def test_subsets_are_nested_per_draw_and_shared_by_the_starts():
     assert np.array_equal(a, subset(342, 10, 0, 0)) and len(subset(342, 342, 0, 0)) == 342
 
 
-def test_replay_repeats_the_real_prints_to_as_many_as_the_simulated():
+def _moved_by(a: np.ndarray, dy: int, dx: int) -> np.ndarray:
+    """Slow reference: ``a`` (..., H, W) moved by whole pixels, zeros coming in."""
+    out = np.zeros_like(a)
+    h, w = a.shape[-2:]
+    out[..., max(dy, 0) : h + min(dy, 0), max(dx, 0) : w + min(dx, 0)] = a[
+        ..., max(-dy, 0) : h - max(dy, 0), max(-dx, 0) : w - max(dx, 0)
+    ]
+    return out
+
+
+def test_moved_copies_are_the_prints_moved_by_whole_pixels():
+    from learn.data.augment import moved_copies
+
+    rng = np.random.default_rng(3)
+    x = torch.from_numpy(rng.random((2, 1, 20, 31), dtype=np.float32))
+    y = torch.from_numpy(rng.choice([0, 2, 4, IGNORE], (2, 20, 31)).astype(np.int64))
+    xs, ys = moved_copies(x, y, 6, 3, 0.0, np.random.default_rng(0))
+    assert xs.shape == (12, 1, 20, 31) and ys.shape == (12, 20, 31)
+    assert torch.equal(xs[:2], x) and torch.equal(ys[:2], y)
+    seen = set()
+    for j in range(2, 12):
+        src_x, src_y = x[j % 2].numpy(), y[j % 2].numpy()
+        fits = [
+            (dy, dx)
+            for dy in range(-3, 4)
+            for dx in range(-3, 4)
+            if np.allclose(xs[j].numpy(), _moved_by(src_x, dy, dx), atol=1e-5)
+            and np.array_equal(ys[j].numpy(), _moved_by(src_y, dy, dx))
+        ]
+        assert len(fits) == 1, f"copy {j} is no whole-pixel move of its print"
+        seen.add(fits[0])
+    assert len(seen) > 3  # the moves differ
+
+
+def test_turned_copies_are_rigid_and_keep_their_labels():
+    """Two labelled marks on a non-square image: every turned copy keeps the marks' distance
+    (pixels square) and turns the line between them by no more than ``turn_deg``."""
+    from learn.data.augment import moved_copies
+
+    x = torch.zeros(1, 1, 31, 61)
+    y = torch.zeros(1, 31, 61, dtype=torch.int64)
+    for (r, c), part in (((10, 15), 3), ((20, 45), 5)):
+        x[0, 0, r - 2 : r + 3, c - 2 : c + 3] = 1.0
+        y[0, r - 2 : r + 3, c - 2 : c + 3] = part
+    y[0, 0, 0] = IGNORE  # an unlabelled pixel moves like any other, or leaves the image
+    xs, ys = moved_copies(x, y, 40, 2, 20.0, np.random.default_rng(1))
+    assert set(torch.unique(ys).tolist()) <= {0, 3, 5, IGNORE}
+    distance, angle = np.hypot(10, 30), np.arctan2(10, 30)
+    turns = []
+    for j in range(1, 40):
+        centres = [np.argwhere(ys[j].numpy() == part).mean(0) for part in (3, 5)]
+        d = centres[1] - centres[0]
+        assert abs(np.hypot(*d) - distance) < 1.0
+        turns.append(np.rad2deg(np.arctan2(d[0], d[1]) - angle))
+        assert abs(float(xs[j].sum()) - 50.0) < 5.0  # the marks' ink, resampled
+    assert max(np.abs(turns)) < 20.0 + 2.0 and max(np.abs(turns)) > 10.0
+
+
+def test_both_starts_train_on_the_same_real_copies():
     from learn.data.load import TensorData
 
-    real = TensorData(torch.zeros(3, 1, 4, 5), torch.ones(3, 4, 5, dtype=torch.int64))
-    sim = TensorData(torch.ones(10, 1, 4, 5), torch.zeros(10, 4, 5, dtype=torch.int64))
-    x, y = with_replay(real, sim)
-    assert x.shape == (10 + 9, 1, 4, 5) and y.shape == (19, 4, 5)  # 10 // 3 = 3 copies of 3
-    assert int((x[:, 0, 0, 0] == 0).sum()) == 9 and bool((y[:10] == 0).all())
-    big = TensorData(torch.zeros(12, 1, 4, 5), torch.ones(12, 4, 5, dtype=torch.int64))
-    assert len(with_replay(big, sim)[1]) == 22  # more real than simulated: each once
-    assert with_replay(real, None)[0] is real.x
+    plan, plain = FinetunePlan(), FinetunePlan(shift_mm=0.0, turn_deg=0.0)
+    assert copies_of(10, plan, "simulation") == copies_of(10, plan, "random") == 30
+    assert copies_of(342, plan, "random") == 2  # moved copies at every k
+    assert (copies_of(10, plain, "simulation"), copies_of(10, plain, "random")) == (30, 1)
+    assert shift_px(plan, (247, 362), (68, 100)) == 5  # 18 mm on a 3.6 mm input pixel
+    real = TensorData(torch.rand(3, 1, 8, 9), torch.ones(3, 8, 9, dtype=torch.int64))
+    sim = TensorData(torch.ones(10, 1, 8, 9), torch.zeros(10, 8, 9, dtype=torch.int64))
+    x, y = training_set(real, sim, 3, 1, plan, 0)
+    assert x.shape == (10 + 9, 1, 8, 9) and torch.equal(x[:10], sim.x)
+    assert torch.equal(x[10:13], real.x) and torch.equal(y[10:13], real.y)
+    assert set(y[13:].unique().tolist()) <= {0, 1}  # moved: empty skin comes in
+    alone = training_set(real, None, 3, 1, plan, 0)
+    assert torch.equal(alone[0], x[10:]) and torch.equal(alone[1], y[10:])
+    assert not torch.equal(training_set(real, None, 3, 1, plan, 1)[0], alone[0])  # per draw
+    with pytest.raises(ConfigError, match=r"--turn-deg -1\.0"):
+        FinetunePlan(turn_deg=-1.0)
+    with pytest.raises(ConfigError, match="--shift-mm nan"):
+        FinetunePlan(shift_mm=float("nan"))
 
 
 def test_finetune_refuses_a_replay_source_before_any_work(real_like, checkpoints, tmp_path):
@@ -208,7 +283,7 @@ def test_finetune_refuses_a_replay_source_before_any_work(real_like, checkpoints
 
 def test_replay_changes_the_pretrained_runs_only(real_like, checkpoints, tmp_path):
     """With and without replay the random starts are the same bytes, the pretrained ones not;
-    results written before replay existed resume as runs without it."""
+    results written before replay and moved copies existed resume as runs without them."""
     train_path, test_path, _, _ = real_like
     rows = {}
     for replay in (0, 3):
@@ -220,14 +295,18 @@ def test_replay_changes_the_pretrained_runs_only(real_like, checkpoints, tmp_pat
     assert rows[0]["random"] == rows[3]["random"]
     assert rows[0]["simulation"]["prints"] == rows[3]["simulation"]["prints"]
     assert rows[0]["simulation"] != rows[3]["simulation"]
-    results = tmp_path / "r0" / "results.json"
+    plan = FinetunePlan(ks=(2,), draws=(1,), steps=3, threads=1, replay=0, shift_mm=0, turn_deg=0)
+    run_finetune(checkpoints["segnet"], train_path, test_path, tmp_path / "old", plan, False)
+    results = tmp_path / "old" / "results.json"
     old = json.loads(results.read_text())
     for field in ("replay_from", "replay_fingerprint"):
         del old["key"][field]
-    del old["key"]["plan"]["replay"]
+    for field in ("replay", "shift_mm", "turn_deg"):
+        del old["key"]["plan"][field]
     results.write_text(json.dumps(old))
-    plan = FinetunePlan(ks=(2,), draws=(1,), steps=3, threads=1, replay=0)
-    again = run_finetune(checkpoints["segnet"], train_path, test_path, tmp_path / "r0", plan, False)
+    again = run_finetune(
+        checkpoints["segnet"], train_path, test_path, tmp_path / "old", plan, False
+    )
     assert again["runs"] == old["runs"]
 
 
