@@ -111,6 +111,15 @@ def generate_set(cfg, folder: Path, workers: int | None, progress: bool) -> dict
     return timing
 
 
+UNMEASURED = ("n_train", "workers", "samples_per_s", "per_core", "cpu_s", "wall_s")
+UNMEASURED += ("n_computed", "accuracy_pct", "miou_pct", "prints")
+
+
+def failure_text(err: Exception) -> str:
+    """What a failed setting's generation said, without the fix aimed at a user's own run."""
+    return str(err).split(". Fix:")[0]
+
+
 def cpu_seconds() -> float:
     """User + system CPU time (s) of this process and of its finished, reaped children (the
     generator joins its worker pool before returning)."""
@@ -190,7 +199,9 @@ def run_fidelity(
     datasets : the folder of the generated datasets (default ``out/data``). Every input is
     checked before any work.
     """
-    from sim.generate.config import GenerateConfig, check_part  # start-up time: sim loads MuJoCo
+    # start-up time: sim loads MuJoCo
+    from sim.episode.runner import SampleFailed
+    from sim.generate.config import GenerateConfig, check_part
 
     if plan.device != "cpu":
         from learn.train.device import check_device  # optional: torch (the learn extra)
@@ -222,12 +233,17 @@ def run_fidelity(
     rows = []
     for setting in chosen:
         cfg, folder = configs[setting.name], folders[setting.name]
+        row = {"name": setting.name, "note": setting.note, "knobs": FS.knob_values(cfg)}
+        row |= {"changes": dict(setting.changes), "dataset": str(folder)}
         if setting.name not in timings:
             print(f"[fidelity] {setting.name}: {plan.n} samples ({setting.note})")
-            timings[setting.name] = generate_set(cfg, folder, plan.workers, progress)
-        n_train = len(training_indices(folder, test_dir))
-        row = {"name": setting.name, "note": setting.note, "knobs": FS.knob_values(cfg)}
-        row |= {"changes": dict(setting.changes), "dataset": str(folder), "n_train": n_train}
+            try:
+                timings[setting.name] = generate_set(cfg, folder, plan.workers, progress)
+            except SampleFailed as err:  # the setting cannot make these presses: a result
+                print(f"[fidelity] {setting.name} fails: {err}")
+                rows.append(row | dict.fromkeys(UNMEASURED) | {"failed": failure_text(err)})
+                continue
+        row["n_train"] = len(training_indices(folder, test_dir))
         row |= timings[setting.name] | {"miou_pct": None, "prints": print_statistics(folder)}
         for a in archs:
             row[METRIC[a]] = score_setting(a, folder, test_dir, tests[a], out, plan, progress)

@@ -53,8 +53,8 @@ def _speed(row: dict) -> float:
 def speed_figure(rows: list[dict], key: str, ylabel: str, chosen=None, band=None, paper_line=None):
     """Test metric (%) against generation speed (samples per CPU-second, log x), a point per
     setting in its own colour, named in the legend; the current default a star, the chosen
-    setting ringed, ``band`` (low, high) % shaded (the rule's tolerance), ``paper_line`` (value
-    %, label) dashed."""
+    setting ringed, a setting that failed named, ``band`` (low, high) % shaded (the rule's
+    tolerance), ``paper_line`` (value %, label) dashed."""
     from matplotlib import ticker  # start-up time: matplotlib
     from matplotlib.figure import Figure
 
@@ -68,6 +68,9 @@ def speed_figure(rows: list[dict], key: str, ylabel: str, chosen=None, band=None
         ax.scatter(*xy, zorder=3, c=f"C{k % 10}", label=name, **style)
         if r["name"] == chosen:
             ax.scatter(*xy, s=420, facecolors="none", edgecolors="0.2", label="chosen by the rule")
+    for r in rows:  # no point to draw: named in the legend
+        if r.get("failed"):
+            ax.plot([], [], "x", color="0.5", label=f"{r['name']}: fails (see the report)")
     if band is not None:
         ax.axhspan(*band, color="C2", alpha=0.12, label="within the rule's tolerance of the best")
     if paper_line is not None:
@@ -95,7 +98,10 @@ def settings_table(rows: list[dict], segmentation: bool) -> str:
             f"`{r['name']}`",
             *(("yes" if v else "no") if isinstance(v, bool) else v for v in r["knobs"]),
         ]
-        + [r[k] for k in keys[: len(keys) - (not segmentation)]]
+        + [
+            "fails" if r.get("failed") and r[k] is None else r[k]
+            for k in keys[: len(keys) - (not segmentation)]
+        ]
         for r in rows
     ]
     return markdown_table(head, body)
@@ -145,18 +151,30 @@ PRINTS_TEXT = (
 )
 
 
+FAILED_TEXT = (
+    "A setting fails when, for some sample, none of the generator's attempts at the press "
+    "(`episode.max_attempts`, each a fresh seed) could be kept; it is neither timed nor trained."
+)
+
+
 def write_report(rep, rows: list[dict], plan, probe, part: str, test: dict) -> dict:
     """The protocol, the settings' table, the charts and the rule's choice into ``rep`` (a
     ``Report``; ``plan``: the ``FidelityPlan``, ``probe``: the HandsNet probe's TrainConfig);
     writes report.md and results.json and returns the results."""
     accs, n_test = [r["accuracy_pct"] for r in rows], test["n_test"]
-    default = next((r for r in rows if r["name"] == FS.DEFAULT), None)
-    same = default and [same_prints(r["prints"], default["prints"]) for r in rows]
+    default = next((r for r in rows if r["name"] == FS.DEFAULT and r["prints"] is not None), None)
+    same = default and [
+        r["prints"] is not None and same_prints(r["prints"], default["prints"]) for r in rows
+    ]
     choice = choose_default([r["per_core"] for r in rows], accs, n_test, same)
     rep.section("Protocol", protocol_text(plan, probe, part, n_test))
     rep.section("Settings, speed and accuracy", settings_table(rows, plan.segmentation))
     if default is not None:
-        rep.section("Prints", PRINTS_TEXT + "\n\n" + prints_table(rows, FS.DEFAULT))
+        made = [r for r in rows if r["prints"] is not None]
+        rep.section("Prints", PRINTS_TEXT + "\n\n" + prints_table(made, FS.DEFAULT))
+    failed = [f"- `{r['name']}` ({r['note']}): {r['failed']}." for r in rows if r.get("failed")]
+    if failed:
+        rep.section("Settings that fail", FAILED_TEXT + "\n\n" + "\n".join(failed))
     picked = None if choice is None else rows[choice.index]["name"]
     band = choice and (accs[choice.best] - choice.tolerance_pt, accs[choice.best])
     for key, net, metric, value, chosen in (

@@ -6,28 +6,19 @@ scored on the other fold by part localisation (`learn.evaluate.real`).
         --train data/real1 --test data/real2 --out reports/real-finetune
 
 For every k (10, 30, 100, 342 by default) and draw (several for small k: a seeded subset of k
-prints of the train fold), both starts train with one recipe: the preset SegNet's optimiser,
-loss (median-frequency weighted cross-entropy over the box-derived labels, unlabelled pixels
-ignored), batch and learning-rate drop, for a fixed number of steps whatever k is. The
-pretrained start also replays simulated prints (``replay``, seeded, from the set it was trained
-on) beside its real ones, each real print repeated to about as many: what simulation offers a
-user beside its weights, and what keeps 10 prints from pulling the network off everything it
-learnt (on held-out prints of the train fold, 10 prints: 69.6 % without replay at the preset
-rate, 72.6 % at a tenth of it, 73.9 % with 300 replayed; zero-shot 69.7; docs/findings.md). The
-random start trains on the real prints alone. Both starts train on the same copies of the real
-prints, each but the first moved and turned (``shift_mm``, ``turn_deg``; `learn.data.augment`): a
-hand pressing the same way elsewhere on the link and at another angle (chosen on held-out prints
-of the train fold, 10 prints, five draws: 72.6 % unmoved, 74.2 % moved up to 18 mm, 75.8 % also
-turned up to 15 deg; docs/findings.md). The pretrained network with no real print (k = 0)
-is the zero-shot point. Results are kept in
-``results.json`` as they come: a stopped run resumes where it stopped.
+prints of the train fold), both starts train with one recipe, `handskin finetune`'s
+(`learn.train.finetune`): the preset SegNet's optimiser and loss for a fixed number of steps
+whatever k is, on copies of the real prints moved and turned, the same copies for both starts.
+The pretrained start also replays simulated prints (``replay``) beside its real ones; the random
+start trains on the real prints alone. The pretrained network with no real print (k = 0) is the
+zero-shot point. Results are kept in ``results.json`` as they come: a stopped run resumes where
+it stopped.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,7 +26,15 @@ import numpy as np
 
 from experiments import experiment
 from experiments import options as O
-from learn.config import SEGNET, RunConfig
+from learn.train.finetune import (
+    FinetuneRecipe,
+    copies_of,
+    replay_prints,
+    replay_source,
+    run_config,
+    shift_px,
+    training_set,
+)
 from tactile.dataset.boxes import BoxFolder, is_box_folder
 from tactile.errors import ConfigError, DataError
 from tactile.files import save_figure, write_text_atomic
@@ -45,40 +44,20 @@ STARTS = ("simulation", "random")  # pretrained on simulated prints; a random st
 
 
 @dataclass(frozen=True)
-class FinetunePlan:
-    """What the experiment runs: real prints per run (``ks``, count), draws of each (``draws``,
-    one per k), optimisation ``steps`` per run, simulated prints the pretrained start replays
-    beside its real ones (``replay``, count; 0: none), how far copies of the real prints are
-    moved on the map (``shift_mm``, mm, up to) and turned (``turn_deg``, deg, up to; both 0:
-    plain repeats), the ``seed`` of the draws and of training."""
+class FinetunePlan(FinetuneRecipe):
+    """The recipe of every run (`learn.train.finetune.FinetuneRecipe`: steps, replay, moves,
+    seed, threads) and what the experiment varies: real prints per run (``ks``, count) and draws
+    of each (``draws``, one per k)."""
 
     ks: tuple[int, ...] = (10, 30, 100, 342)
     draws: tuple[int, ...] = (3, 2, 1, 1)
-    steps: int = 300
-    replay: int = 300
-    shift_mm: float = 18.0
-    turn_deg: float = 15.0
-    seed: int = 0
-    threads: int = 2
 
     def __post_init__(self) -> None:
         if len(self.draws) != len(self.ks) or min(self.draws, default=1) < 1:
             raise ConfigError("--draws: one count >= 1 per k of --ks")
-        if min(self.ks, default=1) < 1 or self.steps < 1:
-            raise ConfigError("--ks and --steps: counts >= 1")
-        if self.replay < 0:
-            raise ConfigError(f"--replay {self.replay}: a count >= 0 of simulated prints")
-        if not self.shift_mm >= 0:
-            raise ConfigError(f"--shift-mm {self.shift_mm}: a distance >= 0 mm (0: not moved)")
-        if not 0 <= self.turn_deg <= 180:
-            raise ConfigError(
-                f"--turn-deg {self.turn_deg}: an angle in [0, 180] deg (0: not turned)"
-            )
-
-    @property
-    def moves(self) -> bool:
-        """Whether copies of the real prints are moved or turned."""
-        return self.shift_mm > 0 or self.turn_deg > 0
+        if min(self.ks, default=1) < 1:
+            raise ConfigError("--ks: counts >= 1")
+        super().__post_init__()
 
 
 QUICK = FinetunePlan(ks=(4, 12), draws=(2, 1), steps=6, replay=8)
@@ -93,22 +72,7 @@ def subset(n: int, k: int, draw: int, seed: int) -> np.ndarray:
     return np.sort(rng.choice(n, k, replace=False))
 
 
-def recipe(base: RunConfig, n: int, plan: FinetunePlan, draw: int) -> RunConfig:
-    """The preset SegNet recipe on ``base``'s network, for ``plan.steps`` steps on n prints (real
-    and replayed) in the paper's three views (the lr drops after two thirds of the epochs), no
-    validation."""
-    per_epoch = math.ceil(3 * n / SEGNET.train.batch_size)
-    epochs = max(1, math.ceil(plan.steps / per_epoch))
-    train = dataclasses.replace(
-        SEGNET.train,
-        epochs=epochs,
-        lr_drop_period_epochs=max(1, round(2 * epochs / 3)),
-        seed=plan.seed + draw,
-    )
-    return dataclasses.replace(base, train=train, val_fraction=0.0, threads=plan.threads)
-
-
-def localisation(model, run: RunConfig, test: BoxFolder) -> dict:
+def localisation(model, run, test: BoxFolder) -> dict:
     """Part localisation of a trained network on the test fold (`learn.evaluate.real`)."""
     from learn.evaluate.real import part_localisation  # optional: torch (the learn extra)
     from learn.infer.fastpath import fast_inference
@@ -117,101 +81,6 @@ def localisation(model, run: RunConfig, test: BoxFolder) -> dict:
     pred = Predictor(fast_inference(model), "segment", run.model.input_size, CLASS_NAMES)
     scores, _ = part_localisation(pred, test)
     return {k: scores[k] for k in ("localised", "boxes", "box_iou", "box_iou_above_half")}
-
-
-KEY_REPLAY = 1  # the replay pick's stream: SeedSequence(seed, spawn_key=(KEY_REPLAY, replay))
-KEY_MOVES = 2  # the moved copies' stream: SeedSequence(seed, spawn_key=(KEY_MOVES, k, draw))
-
-
-def replay_source(sim: Path | None, base: RunConfig, plan: FinetunePlan, ckpt: dict, pretrained):
-    """(dataset path, its fingerprint, its train split's hand prints as a torch dataset) that
-    the pretrained start replays: ``sim`` (``--replay-from``), else the dataset the network
-    trained on (its checkpoint's data path); (None, None, None) when ``plan.replay`` is 0.
-    Checked before any work: a dataset, holding ``plan.replay`` training prints, and, with
-    both fingerprints known, the one the network trained on."""
-    from learn.data.load import fingerprint, is_dataset, open_split
-
-    if plan.replay == 0:
-        if sim is not None:
-            raise ConfigError(f"--replay-from {sim} with --replay 0: leave one of them out")
-        return None, None, None
-    stored = ckpt.get("data") or {}
-    if sim is None:
-        if stored.get("path") is None or not is_dataset(stored["path"]):
-            where = stored.get("path", "data it does not name")
-            raise DataError(
-                f"--pretrained {pretrained}: trained on {where}, not a dataset found here, so "
-                "there is nothing to replay. Fix: --replay-from the simulated dataset, or "
-                "--replay 0"
-            )
-        sim, flag = Path(stored["path"]), f"{stored['path']} (where --pretrained trained)"
-    elif not is_dataset(sim):
-        raise DataError(f"--replay-from {sim}: not a handskin dataset. Fix: handskin generate")
-    else:
-        flag = f"--replay-from {sim}"
-    now, theirs = fingerprint(sim), stored.get("fingerprint")
-    if (
-        now is not None
-        and theirs is not None
-        and Path(sim).resolve() == Path(stored.get("path", "")).resolve()
-        and now != theirs
-    ):
-        raise DataError(
-            f"{flag}: generated again since --pretrained {pretrained} trained on it (fingerprint "
-            f"{theirs[:12]}, now {now[:12]}). Fix: --replay-from the dataset it trained on"
-        )
-    size, canvas = base.model.input_size, base.model.canvas_mm
-    ds = open_split(sim, "train", "segment", size, None, plan.seed, canvas)
-    if plan.replay > len(ds):
-        raise ConfigError(
-            f"--replay {plan.replay}: {sim} holds {len(ds)} hand prints in its train split. "
-            f"Fix: --replay {len(ds)} or less"
-        )
-    return Path(sim), now, ds
-
-
-def replay_prints(ds, plan: FinetunePlan):
-    """``plan.replay`` prints of ``ds`` (TensorData), a seeded pick; None without a source."""
-    from learn.data.load import materialize
-    from learn.data.load import subset as positions_of
-
-    if ds is None:
-        return None
-    seq = np.random.SeedSequence(plan.seed, spawn_key=(KEY_REPLAY, plan.replay))
-    pick = np.sort(np.random.default_rng(seq).choice(len(ds), plan.replay, replace=False))
-    return materialize(positions_of(ds, pick), "replay", False)
-
-
-def copies_of(k: int, plan: FinetunePlan, start: str) -> int:
-    """Copies of each of ``k`` real prints a run of ``start`` trains on: about as many in all as
-    the replayed simulated prints, at least one. With moved copies both starts take the same
-    copies, at least two; without, the random start takes the prints once."""
-    if start == "random" and not plan.moves:
-        return 1
-    return max(2 if plan.moves else 1, plan.replay // k)
-
-
-def shift_px(plan: FinetunePlan, frame_mm: tuple[int, int], size: tuple[int, int]) -> int:
-    """``plan.shift_mm`` in network input pixels: a ``frame_mm`` (rows, columns; the paper's
-    1 mm grid) image resized to ``size`` (h, w) px."""
-    return round(plan.shift_mm * min(size[0] / frame_mm[0], size[1] / frame_mm[1]))
-
-
-def training_set(real, sim, copies: int, shift: int, plan: FinetunePlan, draw: int) -> tuple:
-    """Images and targets of a run: the replayed simulated prints (``sim``; None: none), then
-    ``copies`` of the real ones, all but the first moved by up to ``shift`` px and turned by up
-    to ``plan.turn_deg`` (`learn.data.augment.moved_copies`; seeded by k and ``draw``, so both
-    starts see the same copies)."""
-    import torch  # optional: the learn extra
-
-    from learn.data.augment import moved_copies
-
-    seq = np.random.SeedSequence(plan.seed, spawn_key=(KEY_MOVES, len(real.y), draw))
-    rng = np.random.default_rng(seq)
-    x, y = moved_copies(real.x, real.y, copies, shift, plan.turn_deg, rng)
-    if sim is None:
-        return x, y
-    return torch.cat([sim.x, x]), torch.cat([sim.y, y])
 
 
 def run_finetune(
@@ -243,7 +112,7 @@ def run_finetune(
     train_folder, test_folder = BoxFolder.open(train), BoxFolder.open(test)
     if max(plan.ks) > len(train_folder):
         raise ConfigError(f"--ks {max(plan.ks)}: {train} holds {len(train_folder)} prints")
-    sim, sim_print, sim_ds = replay_source(sim, base, plan, ckpt, pretrained)
+    sim, sim_print, sim_ds = replay_source(sim, base, plan, ckpt, f"--pretrained {pretrained}")
     results_path = out / "results.json"
     done = json.loads(results_path.read_text()) if results_path.is_file() else {"runs": []}
     key = {"pretrained": str(pretrained), "train": str(train), "test": str(test)}
@@ -276,7 +145,7 @@ def run_finetune(
                 sim_part = replay if start == "simulation" else None
                 copies = copies_of(k, plan, start)
                 x, y = training_set(real, sim_part, copies, shift, plan, draw)
-                run = recipe(base, len(y), plan, draw)
+                run = run_config(base, len(y), plan, draw)
                 data = Data(TensorData(x, y, pool.mirror), None, None, CLASS_NAMES, {"k": k})
                 init = ckpt if start == "simulation" else None
                 result = fit(run, data, None, init=init, progress=progress)

@@ -36,6 +36,7 @@ DATASET_MARKS = ("dataset.h5", "manifest.json")
 DATASET_FILES = (*DATASET_MARKS, "info.json", "chunks")
 RUN_MARKS = ("best.pt", "last.pt", "model.npz")
 RUN_FILES = (*RUN_MARKS, "run.toml", "test_metrics.json", "curves.png", "crossval.md")
+RUN_FILES += ("finetune.json",)
 
 
 def require_input(path: Path, what: str, error: type[Exception] = DataError) -> Path:

@@ -602,9 +602,17 @@ CASES += [
     Case("predict-counts-above-16-bit", ["predict", R + "/frame_big.csv", *CLF], COUNTS),
     Case("predict-counts-1e300", ["predict", R + "/frame_1e300.npy", *CLF], ("1e+300", *COUNTS)),
 ]
+CASES += [
+    Case(
+        "finetune-not-box-folder",
+        ["finetune", R + "/ds", "--init", R + "/run/best.pt", "--out", R + "/ft"],
+        ("REAL", "not a box folder", "ingest-boxes"),
+    ),
+]
 TEMPORARY = (".tmp", files.STAGE_PREFIX)
 COMMANDS = ("map", "part", "probe", "assets", "generate", "merge", "export", "ingest", "sheet")
-COMMANDS += ("view", "verify", "train", "evaluate", "predict", "quantize", "experiment")
+COMMANDS += ("view", "verify", "train", "finetune", "evaluate", "predict", "quantize")
+COMMANDS += ("experiment",)
 
 
 def snapshot(root: Path) -> dict[str, str]:

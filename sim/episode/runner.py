@@ -87,6 +87,11 @@ class EpisodeFailure(Exception):
         self.reason = reason
 
 
+class SampleFailed(ConfigError):
+    """A sample none of whose ``max_attempts`` episodes could be kept: these settings cannot
+    make it (`experiments.fidelity` records it as its setting's failure)."""
+
+
 class EpisodeContext:
     """Per-worker state: part, map, skin instance and the cache of compiled press scenes."""
 
@@ -318,7 +323,9 @@ def check_contact(ctx: EpisodeContext, frames: Frames) -> None:
         )
 
 
-def attempts_exhausted(index: int, seed: int, ctx: EpisodeContext, rejects: Counter) -> ConfigError:
+def attempts_exhausted(
+    index: int, seed: int, ctx: EpisodeContext, rejects: Counter
+) -> SampleFailed:
     """The error of sample ``index`` whose ``max_attempts`` attempts all failed (by reason)."""
     cfg = ctx.cfg
     fixes = {  # the commonest reason's setting, in the configuration's words
@@ -332,7 +339,7 @@ def attempts_exhausted(index: int, seed: int, ctx: EpisodeContext, rejects: Coun
     }
     reason = max(rejects, key=rejects.get) if rejects else "no_contact"
     fix = f"{fixes.get(reason, fixes['nan'])}, or raise episode.max_attempts"
-    return ConfigError(
+    return SampleFailed(
         f"sample {index} (seed {seed}) failed {ctx.cfg.max_attempts} attempts: {dict(rejects)}. "
         f"Fix: {fix}"
     )

@@ -343,3 +343,30 @@ def test_cli_reports_a_bad_setting_with_exit_code_2(tmp_path):
     )
     assert res.exit_code == 2 and "nope" in res.output and "choose among" in res.output
     assert not (tmp_path / "o").exists()
+
+
+def test_a_setting_that_fails_is_reported_and_never_chosen(run, tmp_path):
+    """A setting whose generation gave up on a sample (`sim.episode.runner.SampleFailed`) keeps
+    its row, with no speed, score or prints: the report names it and why, the table says it
+    fails, the rule and the prints' table pass over it."""
+    from experiments.fidelity import UNMEASURED, probe_run
+    from experiments.report import Report
+
+    _, results = run
+    chosen = results["choice"]["name"]
+    chosen = chosen if chosen != "default" else "cheapest"  # the default's prints stay known
+    why = "sample 3 (seed 5) failed 20 attempts: {'warning': 20}"
+    rows = [
+        r | dict.fromkeys(UNMEASURED) | {"failed": why} if r["name"] == chosen else r
+        for r in results["settings"]
+    ]
+    rep = Report("fidelity", tmp_path, seed=PLAN.seed, config={})
+    probe = probe_run("handsnet", PLAN).train
+    again = F.write_report(rep, rows, PLAN, probe, "plate", results["test_set"])
+    text = (tmp_path / "report.md").read_text()
+    assert f"- `{chosen}` (" in text and why in text and "## Settings that fail" in text
+    line = next(t for t in text.splitlines() if t.startswith(f"| `{chosen}` |"))
+    assert "fails" in line
+    assert again["choice"]["name"] != chosen
+    prints = text[text.index("## Prints") : text.index("## Settings that fail")]
+    assert f"`{chosen}`" not in prints

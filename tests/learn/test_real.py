@@ -6,6 +6,7 @@ drawn with known boxes; expected scores counted by hand or by a slow per-pixel l
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -341,3 +342,68 @@ def test_evaluate_command_on_a_box_folder(real_like, checkpoints, tiny_dataset, 
     text = out.read_text()
     assert "box-derived" in text and "hand recall" in text and "localised" in text
     assert out.with_suffix(".json").is_file() and out.with_suffix(".png").is_file()
+
+
+def test_finetune_command_is_the_experiments_run_on_all_prints(
+    real_like, checkpoints, tiny_dataset, tmp_path
+):
+    """`handskin finetune` on a box folder trains what the experiment's pretrained run on all
+    of that folder's prints trains: the same replay, copies and steps, so the same scores."""
+    from experiments.real_finetune import localisation
+    from learn.train.checkpoint import load_checkpoint, model_from_checkpoint, run_of
+
+    train_path, test_path, train, test = real_like
+    out = tmp_path / "mine"
+    args = ["finetune", str(train_path), "--init", str(checkpoints["segnet"]), "--out", str(out)]
+    flags = ["--steps", "3", "--replay", "3", "--threads", "1", "--no-progress"]
+    res = CliRunner().invoke(app, [*args, *flags])
+    assert res.exit_code == 0, res.output
+    told = json.loads((out / "finetune.json").read_text())
+    assert (told["real_prints"], told["copies"]) == (len(train), 2)
+    assert Path(told["replay_from"]).resolve() == Path(tiny_dataset).resolve()
+    ckpt = load_checkpoint(out / "best.pt")
+    mine = localisation(model_from_checkpoint(ckpt)[0], run_of(ckpt, out), test)
+    plan = FinetunePlan(ks=(len(train),), draws=(1,), steps=3, threads=1, replay=3)
+    done = run_finetune(checkpoints["segnet"], train_path, test_path, tmp_path / "x", plan, False)
+    theirs = next(r for r in done["runs"] if r["start"] == "simulation")
+    assert {k: theirs[k] for k in mine} == mine
+    start = load_checkpoint(checkpoints["segnet"])["model"]
+    assert any(not torch.equal(start[n], w) for n, w in ckpt["model"].items())
+
+
+@pytest.mark.parametrize(
+    ("what", "expected"),
+    [
+        ("dataset", "REAL .*: not a box folder"),
+        ("classifier", "--init .*: a 'classify' network"),
+        ("turn", r"--turn-deg 200\.0"),
+        ("replay", "--replay 100000"),
+        ("run", "already holds a run"),
+    ],
+)
+def test_finetune_command_refuses_bad_input_before_any_work(
+    real_like, checkpoints, tiny_dataset, tmp_path, what, expected
+):
+    train_path = real_like[0]
+    real, init = str(train_path), str(checkpoints["segnet"])
+    out, extra = tmp_path / "mine", []
+    if what == "dataset":
+        real = str(tiny_dataset)
+    elif what == "classifier":
+        init = str(checkpoints["handsnet"])
+    elif what == "turn":
+        extra = ["--turn-deg", "200"]
+    elif what == "replay":
+        extra = ["--replay", "100000"]
+    else:
+        out.mkdir()
+        (out / "best.pt").write_bytes(b"weights")
+    args = ["finetune", real, "--init", init, "--out", str(out), "--no-progress", *extra]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2
+    assert re.search(expected, res.output), res.output
+    if what == "run":
+        assert sorted(p.name for p in out.iterdir()) == ["best.pt"]
+        assert (out / "best.pt").read_bytes() == b"weights"
+    else:
+        assert not out.exists()
