@@ -23,6 +23,7 @@ from learn.cli.options import (
     opt,
 )
 from tactile.config import read_toml, to_dict
+from tactile.dataset.boxes import is_box_folder
 from tactile.dataset.reader import open_dataset
 from tactile.errors import ConfigError, HandskinError, require_folder
 from tactile.files import os_error_text, require_output, write_text_atomic
@@ -200,6 +201,11 @@ def _train(run, data, out, hand, init, resume, stop, cv_grid, cv_folds, progress
     pretrain = encoder.wanted(scratch, run, data, init, cv_grid, out, resume)
     if init is not None:
         typer.echo(f"--init {init}: {check_init(run, init)[0].summary()}")
+        if run.task == "segment" and is_box_folder(data):
+            typer.echo(
+                f"{data} holds real box-labelled prints: handskin finetune trains a segmenter "
+                "on them by the recipe measured on real prints (docs/learning.md)"
+            )
     if cv_grid and stop is not None:
         raise ConfigError(
             "--stop-after-epoch with --cv-grid: cross-validate first, then train the pick"

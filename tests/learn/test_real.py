@@ -407,3 +407,12 @@ def test_finetune_command_refuses_bad_input_before_any_work(
         assert (out / "best.pt").read_bytes() == b"weights"
     else:
         assert not out.exists()
+
+
+def test_train_init_on_a_box_folder_points_to_finetune(real_like, checkpoints, tmp_path):
+    train_path = real_like[0]
+    args = ["train", str(train_path), "--arch", "segnet", "--init", str(checkpoints["segnet"])]
+    flags = ["--epochs", "1", "--out", str(tmp_path / "run"), "--no-progress"]
+    res = CliRunner().invoke(app, [*args, *flags])
+    assert res.exit_code == 0, res.output
+    assert "handskin finetune" in res.output
