@@ -26,15 +26,7 @@ import numpy as np
 
 from experiments import experiment
 from experiments import options as O
-from learn.train.finetune import (
-    FinetuneRecipe,
-    copies_of,
-    replay_prints,
-    replay_source,
-    run_config,
-    shift_px,
-    training_set,
-)
+from learn.train.finetune import FinetuneRecipe, finetune, replay_prints, replay_source, shift_px
 from tactile.dataset.boxes import BoxFolder, is_box_folder
 from tactile.errors import ConfigError, DataError
 from tactile.files import save_figure, write_text_atomic
@@ -98,9 +90,8 @@ def run_finetune(
     import torch  # optional: the learn extra
 
     from learn.data.boxes import BoxFolderDataset
-    from learn.data.load import Data, TensorData, materialize
+    from learn.data.load import TensorData, materialize
     from learn.train.checkpoint import load_checkpoint, model_from_checkpoint, run_of
-    from learn.train.loop import fit
 
     for flag, path in (("--train", train), ("--test", test)):
         if not is_box_folder(path):
@@ -141,14 +132,20 @@ def run_finetune(
                     r["k"] == k and r["draw"] == draw and r["start"] == start for r in done["runs"]
                 ):
                     continue
-                real = TensorData(pool.x[idx], pool.y[idx])
-                sim_part = replay if start == "simulation" else None
-                copies = copies_of(k, plan, start)
-                x, y = training_set(real, sim_part, copies, shift, plan, draw)
-                run = run_config(base, len(y), plan, draw)
-                data = Data(TensorData(x, y, pool.mirror), None, None, CLASS_NAMES, {"k": k})
-                init = ckpt if start == "simulation" else None
-                result = fit(run, data, None, init=init, progress=progress)
+                real = TensorData(pool.x[idx], pool.y[idx], pool.mirror)
+                pretrained_run = start == "simulation"
+                result, run, _ = finetune(
+                    base,
+                    real,
+                    replay if pretrained_run else None,
+                    shift,
+                    plan,
+                    init=ckpt if pretrained_run else None,
+                    start=start,
+                    draw=draw,
+                    description={"k": k},
+                    progress=progress,
+                )
                 row = {"k": k, "draw": draw, "start": start, "prints": idx.tolist()}
                 row |= localisation(result.model, run, test_folder)
                 done["runs"].append(row)

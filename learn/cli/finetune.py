@@ -15,7 +15,6 @@ from learn.train.finetune import FinetuneRecipe
 from tactile.dataset.boxes import BoxFolder, is_box_folder
 from tactile.errors import ConfigError, DataError, HandskinError, require_folder
 from tactile.files import os_error_text, require_output, write_text_atomic
-from tactile.images.labels import CLASS_NAMES
 
 RealArg = Annotated[
     Path,
@@ -89,17 +88,9 @@ def _finetune(real, init, out, sim, recipe: FinetuneRecipe, progress: bool) -> N
     import torch
 
     from learn.data.boxes import BoxFolderDataset
-    from learn.data.load import Data, TensorData, materialize
+    from learn.data.load import materialize
     from learn.train.checkpoint import load_checkpoint, run_of, versions
-    from learn.train.finetune import (
-        copies_of,
-        replay_prints,
-        replay_source,
-        run_config,
-        shift_px,
-        training_set,
-    )
-    from learn.train.loop import fit
+    from learn.train.finetune import copies_of, finetune, replay_prints, replay_source, shift_px
 
     ckpt = load_checkpoint(init)
     base = run_of(ckpt, init)
@@ -116,17 +107,17 @@ def _finetune(real, init, out, sim, recipe: FinetuneRecipe, progress: bool) -> N
     prints = materialize(source, "real", progress)
     shift = shift_px(recipe, folder.frame_px or folder[0].image.shape, size)
     copies = copies_of(len(prints.y), recipe)
-    x, y = training_set(prints, replay_prints(sim_ds, recipe), copies, shift, recipe)
-    run = run_config(base, len(y), recipe)
     desc = {"path": str(real), "kind": "box folder", "real_prints": len(prints.y)}
     desc |= {"copies": copies, "init": str(init), "recipe": dataclasses.asdict(recipe)}
     desc |= {"replay_from": None if sim is None else str(sim), "replay_fingerprint": sim_print}
-    data = Data(TensorData(x, y, prints.mirror), None, None, CLASS_NAMES, desc)
     typer.echo(
         f"fine-tuning {init} on {len(prints.y)} real prints x {copies} copies"
         + (f" and {recipe.replay} simulated from {sim}" if sim is not None else "")
         + f", {recipe.steps} steps"
     )
-    fit(run, data, out, init=ckpt, progress=progress)
+    replay = replay_prints(sim_ds, recipe)
+    finetune(
+        base, prints, replay, shift, recipe, init=ckpt, out=out, description=desc, progress=progress
+    )
     write_text_atomic(out / "finetune.json", json.dumps(desc | {"versions": versions()}, indent=1))
     typer.echo(f"run written to {out}; score it: handskin evaluate OTHER_REAL {out / 'best.pt'}")

@@ -3,8 +3,7 @@ chosen on held-out real prints (docs/findings.md), shared by `handskin finetune`
 `real-finetune` experiment.
 
     recipe = FinetuneRecipe()  # 300 steps, 300 simulated replayed, moved 18 mm, turned 15 deg
-    x, y = training_set(real, replay, copies_of(len(real.y), recipe), shift, recipe)
-    fit(run_config(base, len(y), recipe), Data(TensorData(x, y), ...), out, init=ckpt)
+    result, run, copies = finetune(base, real, replay, shift, recipe, init=ckpt, out="runs/ft")
 
 The network trains with the preset SegNet's optimiser, loss (median-frequency weighted
 cross-entropy over the box-derived labels, unlabelled pixels ignored), batch and learning-rate
@@ -29,6 +28,7 @@ import numpy as np
 
 from learn.config import SEGNET, RunConfig
 from tactile.errors import ConfigError, DataError
+from tactile.images.labels import CLASS_NAMES
 
 KEY_REPLAY = 1  # the replay pick's stream: SeedSequence(seed, spawn_key=(KEY_REPLAY, replay))
 KEY_MOVES = 2  # the moved copies' stream: SeedSequence(seed, spawn_key=(KEY_MOVES, k, draw))
@@ -172,3 +172,21 @@ def training_set(real, sim, copies: int, shift: int, recipe: FinetuneRecipe, dra
     if sim is None:
         return x, y
     return torch.cat([sim.x, x]), torch.cat([sim.y, y])
+
+
+def finetune(base: RunConfig, real, replay, shift: int, recipe: FinetuneRecipe, **kw):
+    """Train ``base``'s network by the recipe on copies of the ``real`` prints (TensorData,
+    with its mirror pairs) beside the ``replay`` ones (None: none); returns (FitResult, the
+    RunConfig, copies of each real print). Keywords: ``init`` (checkpoint dict; None: a random
+    start), ``start`` ("simulation" or "random", for `copies_of`), ``draw``, ``out`` (run
+    folder; None writes nothing), ``description`` (the checkpoint's data), ``progress``."""
+    from learn.data.load import Data, TensorData
+    from learn.train.loop import fit
+
+    draw = kw.get("draw", 0)
+    copies = copies_of(len(real.y), recipe, kw.get("start", "simulation"))
+    x, y = training_set(real, replay, copies, shift, recipe, draw)
+    run = run_config(base, len(y), recipe, draw)
+    data = Data(TensorData(x, y, real.mirror), None, None, CLASS_NAMES, kw.get("description", {}))
+    result = fit(run, data, kw.get("out"), init=kw.get("init"), progress=kw.get("progress", False))
+    return result, run, copies

@@ -15,18 +15,12 @@ import torch
 from PIL import Image
 from typer.testing import CliRunner
 
-from experiments.real_finetune import (
-    FinetunePlan,
-    copies_of,
-    run_finetune,
-    shift_px,
-    subset,
-    training_set,
-)
+from experiments.real_finetune import FinetunePlan, run_finetune, subset
 from handskin.cli import app
 from learn.data.boxes import BoxFolderDataset
 from learn.evaluate.real import evaluate_real, localise
 from learn.infer.predict import load_predictor, predict_image
+from learn.train.finetune import copies_of, shift_px, training_set
 from learn.train.losses import SegmentationLoss, class_weights
 from tactile.dataset import open_dataset
 from tactile.dataset.boxes import BoxFolder, box_labels
