@@ -235,7 +235,7 @@ def load_generate_config(path: str | Path | None = None, **changes: Any) -> Gene
 def generator_version() -> str:
     """``<handskin version>+src.<sha256 prefix of sim/ and tactile/ sources>``: in the
     fingerprint, so a folder started by other code is refused instead of mixed."""
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]  # above sim/ (this file: sim/generate/config.py)
     digest = hashlib.sha256()
     for path in sorted([*root.glob("sim/**/*.py"), *root.glob("tactile/**/*.py")]):
         digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())

@@ -278,6 +278,27 @@ def test_folder_started_by_other_code_is_refused_with_the_reason(tmp_path: Path)
         refuse_other_code(tmp_path, make_manifest(cfg, "plate", generator_version(), cfg.seed))
 
 
+def test_generator_version_hashes_the_sim_and_tactile_sources() -> None:
+    """The version in every fingerprint covers the code that made the data: an independent hash
+    of the sim/ and tactile/ package sources as installed (not the hash of no files)."""
+    import hashlib
+
+    import sim
+    import tactile
+    from sim.generate.config import generator_version
+
+    digest = hashlib.sha256()
+    files = []
+    for package in (sim, tactile):
+        top = Path(package.__file__).parent
+        files += [(p.relative_to(top.parent).as_posix(), p) for p in top.rglob("*.py")]
+    for name, path in sorted(files):
+        digest.update(name.encode() + b"\0" + path.read_bytes())
+    assert len(files) > 50
+    assert generator_version().endswith("+src." + digest.hexdigest()[:12])
+    assert not generator_version().endswith(hashlib.sha256().hexdigest()[:12])
+
+
 def test_min_active_taxels_replaces_only_the_small_prints(reference: Path, tmp_path: Path) -> None:
     """A sample of the unfiltered run with >= M active taxels passed every check the filtered run
     makes at the same attempt, so it is kept byte for byte; the others are redrawn to >= M."""
