@@ -90,9 +90,14 @@ def test_checkpoint_round_trip_and_resume(tiny_dataset, tiny_run, tmp_path):
     assert {"model", "optimizer", "config", "epoch", "best_metric", "versions", "seed"} <= set(ckpt)
     assert run_from_dict(ckpt["config"]) == run and ckpt["config"] == to_dict(run)
     model, _ = model_from_checkpoint(ckpt)
+    for k, v in model.state_dict().items():  # best.pt holds the trained weights bit for bit
+        assert torch.equal(v, full.model.state_dict()[k]), k
     x = data.test.x[:4]
     with torch.no_grad():
-        assert torch.allclose(model(x), full.model.eval()(x))
+        # Equal weights may still run other float32 kernels: a size-1 dimension's stride differs
+        # between the trained and the loaded tensor, and oneDNN picks its path by the strides on
+        # some CPUs (7e-7 apart on an Intel Xeon); so the outputs agree to 1e-5, not bit for bit.
+        assert torch.allclose(model(x), full.model.eval()(x), rtol=1e-4, atol=1e-5)
     assert (tmp_path / "full" / "curves.png").stat().st_size > 0
     assert ckpt["init"] == "random"
 
